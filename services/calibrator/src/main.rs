@@ -1,1 +1,2 @@
+//! The live calibrator process: placeholder until its issue; the engine is the library.
 fn main() {}

@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::JOINT_COUNT;
+
 /// A link of the 5-bars (or the needle offset) whose length an effect may change.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -29,7 +31,7 @@ pub struct JointMotion {
 
 /// One effect with its parameters. Joints are indexed 0..5 (θ1 = 0).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Effect {
     /// Transmission ripple (e.g. capstan eccentricity): adds
     /// `amplitude · sin(harmonic · θ_enc + phase)` (rad at the joint) to the joint angle.
@@ -69,7 +71,188 @@ pub enum Effect {
 
 /// Normalised gravity-torque feature of joint `joint` at joint angles `q` (dimensionless,
 /// magnitude ≤ 1), gravity along −y of `Bb`.
+///
+/// - θ1, θ2 (front stage, whose plane is the x-y plane of `Bf` ≈ `Bb`, so it contains gravity):
+///   the gravity torque about the joint axis of a link at absolute angle θ is ∝ cos θ, so the
+///   feature is `cos θ_j`.
+/// - θ4, θ5 (back stage, its plane turned by θ3 about x): only the in-plane part `cos θ3` of
+///   gravity loads them, so the feature is `cos θ3 · cos θ_j`.
+/// - θ3 (the back stage rolling about x): gravity at the stage's centre of mass
+///   `Rx(θ3)·(X, Y, 0)` has the torque `g·Y·sin θ3` about x. With `Y` normalised by the link
+///   length to `(sin θ4 + sin θ5)/2` the feature is `sin θ3 · (sin θ4 + sin θ5)/2`.
+///
+/// An index ≥ 5 has no feature (0).
 pub fn gravity_feature(joint: usize, q: &crate::Joints) -> f64 {
-    let _ = (joint, q);
-    todo!()
+    match joint {
+        0 | 1 => q[joint].cos(),
+        2 => q[2].sin() * 0.5 * (q[3].sin() + q[4].sin()),
+        3 | 4 => q[2].cos() * q[joint].cos(),
+        _ => 0.0,
+    }
+}
+
+/// Applies the joint-side effects (ripple, backlash, compliance) of `effects` to the
+/// paper-model joint angles `q_paper` (rad), given the motor angles θ_enc (rad) and the
+/// motion state. Link-length effects are not joint-side and are ignored here.
+///
+/// - ripple adds `amplitude · sin(harmonic · θ_enc,j + phase)`;
+/// - backlash subtracts `direction_j · width/2` (the joint lags behind the motor);
+/// - compliance adds `gain · gravity_feature(j, q_paper)` (the deflection is small, so the
+///   feature is evaluated at the undeflected joints).
+///
+/// Effects naming a joint index ≥ 5 are ignored (parameter validation rejects them).
+pub fn apply_joint_effects(
+    effects: &[Effect],
+    q_paper: &crate::Joints,
+    motor_angles: &crate::Joints,
+    motion: &JointMotion,
+) -> crate::Joints {
+    let mut q = *q_paper;
+    for effect in effects {
+        match *effect {
+            Effect::TransmissionRipple {
+                joint,
+                harmonic,
+                amplitude,
+                phase,
+            } if joint < JOINT_COUNT => {
+                q[joint] += amplitude * (harmonic * motor_angles[joint] + phase).sin();
+            }
+            Effect::Backlash { joint, width } if joint < JOINT_COUNT => {
+                q[joint] -= motion.direction[joint] * 0.5 * width;
+            }
+            Effect::JointCompliance { joint, gain } if joint < JOINT_COUNT => {
+                q[joint] += gain * gravity_feature(joint, q_paper);
+            }
+            _ => {}
+        }
+    }
+    q
+}
+
+impl Effect {
+    /// Checks the parameters: joint index < 5, finite numbers, non-negative backlash width.
+    /// The error says what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        let (joint, numbers): (Option<usize>, Vec<(&str, f64)>) = match *self {
+            Effect::TransmissionRipple {
+                joint,
+                harmonic,
+                amplitude,
+                phase,
+            } => (
+                Some(joint),
+                vec![
+                    ("harmonic", harmonic),
+                    ("amplitude", amplitude),
+                    ("phase", phase),
+                ],
+            ),
+            Effect::Backlash { joint, width } => {
+                if width < 0.0 {
+                    return Err(format!("backlash width must not be negative, got {width}"));
+                }
+                (Some(joint), vec![("width", width)])
+            }
+            Effect::LinkLength { delta, .. } => (None, vec![("delta", delta)]),
+            Effect::JointCompliance { joint, gain } => (Some(joint), vec![("gain", gain)]),
+        };
+        if let Some(joint) = joint {
+            if joint >= JOINT_COUNT {
+                return Err(format!(
+                    "joint index {joint} is out of range (joints are 0..{JOINT_COUNT})"
+                ));
+            }
+        }
+        for (name, value) in numbers {
+            if !value.is_finite() {
+                return Err(format!("`{name}` must be finite, got {value}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const Q: crate::Joints = [-2.3, -0.8, 0.1, -2.7, -0.6];
+    const MOTOR: crate::Joints = [1.0, -2.0, 3.0, 0.5, 7.0];
+
+    fn apply(effects: &[Effect], direction: [f64; 5]) -> crate::Joints {
+        apply_joint_effects(effects, &Q, &MOTOR, &JointMotion { direction })
+    }
+
+    #[test]
+    fn ripple_follows_the_motor_angle_of_its_joint() {
+        let effect = Effect::TransmissionRipple {
+            joint: 4,
+            harmonic: 2.0,
+            amplitude: 0.003,
+            phase: 0.4,
+        };
+        let q = apply(&[effect], [0.0; 5]);
+        assert_eq!(q[..4], Q[..4]);
+        assert!((q[4] - (Q[4] + 0.003 * (2.0 * 7.0 + 0.4f64).sin())).abs() < 1e-15);
+    }
+
+    #[test]
+    fn backlash_lags_behind_the_motion() {
+        let effect = Effect::Backlash {
+            joint: 1,
+            width: 0.01,
+        };
+        let forward = apply(std::slice::from_ref(&effect), [0.0, 1.0, 0.0, 0.0, 0.0]);
+        let backward = apply(std::slice::from_ref(&effect), [0.0, -1.0, 0.0, 0.0, 0.0]);
+        let unknown = apply(&[effect], [0.0; 5]);
+        assert!((forward[1] - (Q[1] - 0.005)).abs() < 1e-15);
+        assert!((backward[1] - (Q[1] + 0.005)).abs() < 1e-15);
+        assert_eq!(unknown, Q);
+    }
+
+    #[test]
+    fn compliance_scales_the_gravity_feature() {
+        let effect = Effect::JointCompliance {
+            joint: 2,
+            gain: 0.02,
+        };
+        let q = apply(&[effect], [0.0; 5]);
+        assert!((q[2] - (Q[2] + 0.02 * gravity_feature(2, &Q))).abs() < 1e-15);
+        assert_ne!(q[2], Q[2]);
+    }
+
+    #[test]
+    fn link_lengths_leave_the_joints_alone() {
+        let effect = Effect::LinkLength {
+            link: Link::LF,
+            delta: 0.3,
+        };
+        assert_eq!(apply(&[effect], [1.0; 5]), Q);
+    }
+
+    #[test]
+    fn gravity_features_are_bounded_torques() {
+        // A proximal front link pointing straight down (−y) carries no gravity torque,
+        // a horizontal one the most.
+        let mut q = Q;
+        q[0] = -std::f64::consts::FRAC_PI_2;
+        assert!(gravity_feature(0, &q).abs() < 1e-15);
+        q[0] = 0.0;
+        assert_eq!(gravity_feature(0, &q), 1.0);
+        // The back stage rolled by θ3 = 0 hangs in the vertical plane: no torque about x.
+        q[2] = 0.0;
+        assert_eq!(gravity_feature(2, &q), 0.0);
+        // Rolled by 90°, its plane is horizontal: no in-plane gravity on θ4, θ5.
+        q[2] = std::f64::consts::FRAC_PI_2;
+        assert!(gravity_feature(3, &q).abs() < 1e-15);
+        assert!(gravity_feature(2, &q).abs() > 0.1);
+        for joint in 0..5 {
+            for k in 0..100 {
+                let angles: crate::Joints = std::array::from_fn(|i| 0.37 * (k * (i + 1)) as f64);
+                assert!(gravity_feature(joint, &angles).abs() <= 1.0);
+            }
+        }
+        assert_eq!(gravity_feature(5, &Q), 0.0);
+    }
 }

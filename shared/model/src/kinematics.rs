@@ -1,8 +1,26 @@
 //! Forward and inverse kinematics (robot-model.md §3–§4). All poses in `Bb`, mm and rad.
 
-use nalgebra::{Isometry3, Point3, Unit, Vector3};
+use std::f64::consts::TAU;
+
+use nalgebra::{
+    Isometry3, Matrix3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3,
+};
 
 use crate::{Geometry, Joints};
+
+mod roll;
+mod stage;
+
+use stage::FiveBar;
+
+/// The home pose of robot-model.md §3 (needle along +z, tip at (0, −90, 180) mm in `Bb`):
+/// joint angles θ1..θ5 (rad). A good `near` for [`inverse`] when nothing better is known.
+pub const HOME_JOINTS: Joints = [-2.368404, -0.777628, 0.0, -2.685073, -0.601543];
+
+/// Largest tip error (mm) at which an IK candidate counts as reproducing the target.
+const IK_TIP_TOLERANCE_MM: f64 = 1e-6;
+/// Largest needle-direction error (unit vector difference) of an accepted IK candidate.
+const IK_DIRECTION_TOLERANCE: f64 = 1e-8;
 
 /// The result of forward kinematics: needle and effector poses in `Bb`.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,20 +48,222 @@ pub enum KinematicsError {
     Unreachable(String),
 }
 
+/// The gimbal centres and the needle frame axes, in `Bb` (mm): what FK computes before it
+/// builds poses.
+struct NeedleChain {
+    /// Front stage planar effector point `(x, y)` in `Bf` (mm).
+    front_planar: (f64, f64),
+    /// Back gimbal centre `p_b`.
+    p_b: Vector3<f64>,
+    /// Needle axes `x_N`, `y_N`, `z_N`.
+    axes: [Vector3<f64>; 3],
+    /// Tip `p_n`.
+    tip: Vector3<f64>,
+}
+
+fn check_finite_joints(q: &Joints, what: &'static str) -> Result<(), KinematicsError> {
+    if q.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(KinematicsError::NotFinite(what))
+    }
+}
+
+/// `Rx(θ) · v`.
+fn rotate_x(angle: f64, v: &Vector3<f64>) -> Vector3<f64> {
+    let (s, c) = angle.sin_cos();
+    Vector3::new(v.x, c * v.y - s * v.z, s * v.y + c * v.z)
+}
+
+/// Steps 1–4 of robot-model.md §3 without building poses.
+fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, KinematicsError> {
+    check_finite_joints(q, "joint angles")?;
+    let front_planar = FiveBar::front(geometry).forward(q[0], q[1]);
+    let back_planar = FiveBar::back(geometry).forward(q[3], q[4]);
+    let p_f = geometry.front_base * Point3::new(front_planar.0, front_planar.1, 0.0);
+    let p_b = rotate_x(q[2], &Vector3::new(back_planar.0, back_planar.1, 0.0));
+    let a_b = rotate_x(q[2], &Vector3::y());
+
+    let d = geometry.d_offset;
+    let to_front = p_f.coords - p_b;
+    let distance = to_front.norm();
+    if distance.is_nan() || distance <= d {
+        return Err(KinematicsError::Unreachable(format!(
+            "the gimbal centres are {distance} mm apart, not more than d_offset = {d} mm"
+        )));
+    }
+    let e = to_front / distance;
+    let normal = a_b.cross(&e);
+    let normal_norm = normal.norm();
+    if normal_norm.is_nan() || normal_norm <= 1e-12 {
+        return Err(KinematicsError::Unreachable(
+            "the line between the gimbal centres is parallel to the back gimbal axis".into(),
+        ));
+    }
+    let n = normal / normal_norm;
+    let e_perp = n.cross(&e);
+    let cos_alpha = d / distance;
+    let sin_alpha = (1.0 - cos_alpha * cos_alpha).sqrt();
+    // Of p_r = p_b + d(cos α e ± sin α e⊥), '+' is the one with x_N·n > 0: in the
+    // right-handed basis (e, e⊥, n), y_N = −(cos α e ± sin α e⊥) and z_N ∝ sin α e ∓ cos α e⊥,
+    // so x_N = y_N × z_N = ±n.
+    let y_n = -(cos_alpha * e + sin_alpha * e_perp);
+    let p_r = p_b - d * y_n;
+    let z_n = (p_f.coords - p_r).normalize();
+    let x_n = y_n.cross(&z_n);
+    Ok(NeedleChain {
+        front_planar,
+        p_b,
+        axes: [x_n, y_n, z_n],
+        tip: p_r + geometry.l_n * z_n,
+    })
+}
+
 /// Forward kinematics: joint angles → needle and effector poses in `Bb`.
 pub fn forward(geometry: &Geometry, q: &Joints) -> Result<NeedlePose, KinematicsError> {
-    let _ = (geometry, q);
-    todo!()
+    let chain = needle_chain(geometry, q)?;
+    let [x_n, y_n, z_n] = chain.axes;
+    let needle_rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+        Matrix3::from_columns(&[x_n, y_n, z_n]),
+    ));
+    let (x, y) = chain.front_planar;
+    let front_in_base = Isometry3::from_parts(
+        Translation3::new(x, y, 0.0),
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), q[1]),
+    );
+    let back_rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), q[2])
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), q[4]);
+    Ok(NeedlePose {
+        tip: Point3::from(chain.tip),
+        direction: Unit::new_unchecked(z_n),
+        needle: Isometry3::from_parts(Translation3::from(chain.tip), needle_rotation),
+        front_effector: geometry.front_base * front_in_base,
+        back_effector: Isometry3::from_parts(Translation3::from(chain.p_b), back_rotation),
+    })
+}
+
+/// A joint-vector candidate of the inverse kinematics and its squared distance to `near`.
+#[derive(Clone, Copy)]
+struct Candidate {
+    q: Joints,
+    distance: f64,
+}
+
+/// Wraps `angle` (rad) to within π of `reference`.
+fn wrap_near(angle: f64, reference: f64) -> f64 {
+    angle - TAU * ((angle - reference) / TAU).round()
 }
 
 /// Inverse kinematics: tip `p_n` (mm, `Bb`) and needle direction `z_N` → joints, the
 /// solution nearest `near` (wrapped to within π of it). Unreachable targets are an error.
+///
+/// `direction` need not be unit length (it is normalised) but must not be zero. The result
+/// is checked by [`forward`]: its tip is within 1e-6 mm of `tip`.
 pub fn inverse(
     geometry: &Geometry,
     tip: &Point3<f64>,
     direction: &Vector3<f64>,
     near: &Joints,
 ) -> Result<Joints, KinematicsError> {
-    let _ = (geometry, tip, direction, near);
-    todo!()
+    if !tip.coords.iter().all(|v| v.is_finite()) {
+        return Err(KinematicsError::NotFinite("tip"));
+    }
+    if !direction.iter().all(|v| v.is_finite()) {
+        return Err(KinematicsError::NotFinite("needle direction"));
+    }
+    check_finite_joints(near, "near joints")?;
+    let length = direction.norm();
+    if length <= 1e-12 || length.is_infinite() {
+        return Err(KinematicsError::Unreachable(format!(
+            "the needle direction has no usable length ({length})"
+        )));
+    }
+    let z = direction / length;
+    let p_r = tip.coords - geometry.l_n * z;
+
+    // p_f: the needle line p_r + t·z meets the plane z = 0 of Bf.
+    let to_front = geometry.front_base.inverse();
+    let origin = to_front * Point3::from(p_r);
+    let along = to_front.rotation * z;
+    if along.z.abs() < 1e-9 {
+        return Err(KinematicsError::Unreachable(
+            "the needle is parallel to the front stage plane".into(),
+        ));
+    }
+    let t = -origin.z / along.z;
+    if t.is_nan() || t <= 0.0 {
+        return Err(KinematicsError::Unreachable(format!(
+            "the needle line meets the front stage plane {} mm behind p_r, not in front of it",
+            -t
+        )));
+    }
+    let front_point = (origin.x + t * along.x, origin.y + t * along.y);
+    let front = FiveBar::front(geometry)
+        .inverse(front_point.0, front_point.1)
+        .map_err(|reason| KinematicsError::Unreachable(format!("front 5-bar: {reason}")))?;
+    let p_f = p_r + t * z;
+
+    let back_stage = FiveBar::back(geometry);
+    let d = geometry.d_offset;
+    let mut candidates = [Candidate {
+        q: [0.0; 5],
+        distance: f64::INFINITY,
+    }; roll::MAX_ROOTS * 4];
+    let mut count = 0;
+    let mut last_failure =
+        "no needle roll puts the back gimbal axis in the needle plane".to_owned();
+    for v in roll::gimbal_plane_directions(&p_r, &z, d).iter() {
+        let p_b = p_r + d * v;
+        let radius = p_b.y.hypot(p_b.z);
+        if radius.is_nan() || radius <= 1e-9 {
+            last_failure = "the back gimbal centre would lie on the θ3 axis".into();
+            continue;
+        }
+        let a_b = Vector3::new(0.0, -p_b.y / radius, -p_b.z / radius);
+        // Forward kinematics picks the perpendicular foot with x_N·n > 0; keep only rolls
+        // that agree with it.
+        if v.cross(&z).dot(&a_b.cross(&(p_f - p_b))) <= 0.0 {
+            last_failure = "the needle lies on the wrong side of the back gimbal".into();
+            continue;
+        }
+        let theta3 = (-p_b.z).atan2(-p_b.y);
+        let back = match back_stage.inverse(p_b.x, -radius) {
+            Ok(back) => back,
+            Err(reason) => {
+                last_failure = format!("back 5-bar: {reason}");
+                continue;
+            }
+        };
+        for &(theta4, theta5) in &back {
+            for &(theta1, theta2) in &front {
+                let raw = [theta1, theta2, theta3, theta4, theta5];
+                let q: Joints = std::array::from_fn(|i| wrap_near(raw[i], near[i]));
+                let distance = q.iter().zip(near).map(|(a, b)| (a - b) * (a - b)).sum();
+                candidates[count] = Candidate { q, distance };
+                count += 1;
+            }
+        }
+    }
+    let candidates = &mut candidates[..count];
+    candidates.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
+    for candidate in candidates.iter() {
+        if reproduces(geometry, &candidate.q, &tip.coords, &z) {
+            return Ok(candidate.q);
+        }
+    }
+    if !candidates.is_empty() {
+        last_failure = "no candidate solution reproduces the target (singular pose)".into();
+    }
+    Err(KinematicsError::Unreachable(last_failure))
+}
+
+/// True when FK of `q` puts the tip within 1e-6 mm of `tip` and the needle along `z`.
+fn reproduces(geometry: &Geometry, q: &Joints, tip: &Vector3<f64>, z: &Vector3<f64>) -> bool {
+    match needle_chain(geometry, q) {
+        Ok(chain) => {
+            (chain.tip - tip).norm() <= IK_TIP_TOLERANCE_MM
+                && (chain.axes[2] - z).norm() <= IK_DIRECTION_TOLERANCE
+        }
+        Err(_) => false,
+    }
 }

@@ -9,8 +9,11 @@ pub mod kinematics;
 pub mod params;
 
 pub use effects::{Effect, JointMotion, Link};
-pub use kinematics::{forward, inverse, KinematicsError, NeedlePose};
-pub use params::{Geometry, JointCalibration, MarkerMounts, ParamsError, RobotParams};
+pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
+pub use params::{
+    CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,
+    RobotParams,
+};
 
 /// A joint vector θ1..θ5 in radians (robot-model.md §2).
 pub type Joints = [f64; 5];

@@ -1,1 +1,92 @@
-//! placeholder
+//! The common process runtime of every SABR service.
+//!
+//! - [`NodeRuntime`]: the iceoryx2 node of the process in the graph's [`Domain`] (env
+//!   `SABR_DOMAIN`, one explicit iceoryx2 config for every process), stale-node cleanup at start,
+//!   SIGINT/SIGTERM handling, readiness and heartbeat on `sabr/graph/lifecycle`, typed
+//!   [`Publisher`]/[`Subscriber`] ports, and the main loops [`NodeRuntime::run_loop`] (fixed
+//!   rate) and [`NodeRuntime::run_on_data`] (wake on data, with an idle deadline).
+//! - [`Deadline`]: notices a stalled or dead peer while waiting.
+//! - [`GraphObserver`]: watches the lifecycle of all nodes of a domain (used by the launcher).
+//! - [`monotonic_ns`]: the clock of every `t_ns`.
+
+mod deadline;
+mod domain;
+mod observer;
+mod ports;
+mod runtime;
+mod time;
+
+pub use deadline::Deadline;
+pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
+pub use observer::{domain_files, release_domain, GraphObserver};
+pub use ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
+pub use runtime::{
+    run_dir, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD, NODE_NAME_ENV,
+    RUN_DIR_ENV,
+};
+pub use time::monotonic_ns;
+
+/// The iceoryx2 crate this runtime is built on, for direct use of what the helpers lack.
+pub use iceoryx2;
+/// The message types and service names.
+pub use sabr_msgs as msgs;
+
+/// Errors of the node runtime; each names what failed and why.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    /// The domain name is not usable.
+    #[error("invalid domain {value:?} (env SABR_DOMAIN): {reason}")]
+    InvalidDomain {
+        /// The rejected value.
+        value: String,
+        /// Why it was rejected.
+        reason: &'static str,
+    },
+    /// The node name is not usable.
+    #[error("invalid node name {name:?}: {reason}")]
+    InvalidName {
+        /// The rejected name.
+        name: String,
+        /// Why it was rejected.
+        reason: String,
+    },
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create the iceoryx2 node: {0}")]
+    Node(String),
+    /// An operation on a service or port failed.
+    #[error("service {service:?}: {operation} failed: {reason}")]
+    Port {
+        /// The service name.
+        service: String,
+        /// What was attempted.
+        operation: &'static str,
+        /// The iceoryx2 error.
+        reason: String,
+    },
+}
+
+impl NodeError {
+    pub(crate) fn port(service: &str, operation: &'static str, error: impl std::fmt::Debug) -> Self {
+        NodeError::Port {
+            service: service.to_owned(),
+            operation,
+            reason: format!("{error:?}"),
+        }
+    }
+}
+
+/// Sets up logging to stderr (level from `RUST_LOG`, default `info`; no colours unless stderr
+/// is a terminal) and iceoryx2's own log level (warnings). The launcher sends each node's
+/// stderr to `runs/<id>/logs/<node>.log`. Calling it again does nothing.
+pub fn init_tracing() {
+    use std::io::IsTerminal;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    // An error only means a subscriber is already installed.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+}

@@ -1,0 +1,324 @@
+//! The calibration pipeline: recording → time sync → stepwise method → joint fit →
+//! validation → report and calibrated parameters.
+
+use std::time::Instant;
+
+use sabr_model::RobotParams;
+use sabr_recording::Recording;
+
+use crate::frames::measured_frames;
+use crate::joint_fit::{joint_fit, JointFit};
+use crate::layout::{CalibModel, ParamId, ParamLayout};
+use crate::noise::NoiseModel;
+use crate::observations::{joint_ranges, Observation, Phase, PhaseTable, SessionData};
+use crate::report::{
+    model_residuals, parameter_table, DataReport, IdentifiabilityReport, NoiseReport, Report,
+    TimeSyncReport, ValidationReport,
+};
+use crate::stats::median;
+use crate::stepwise::{stepwise, FitSets};
+use crate::timesync::{ClockFit, EncoderTrack};
+use crate::validation::{
+    cross_validated_tip, marker_tip_errors, predicted_tip_std, tip_sphere_error,
+    validation_holds, TipError,
+};
+use crate::{latency, CalibrationError};
+
+/// Knobs of the calibration, with sensible defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CalibrationOptions {
+    /// Least range (rad) every joint must cover during the excitation.
+    pub min_joint_range_rad: f64,
+    /// Largest encoder gap (ms) to interpolate across.
+    pub max_encoder_gap_ms: f64,
+    /// Fewest tip-sphere readings in the tip phase.
+    pub min_tip_readings: usize,
+    /// Fewest static frames in the homing dwell.
+    pub min_dwell_frames: usize,
+}
+
+impl Default for CalibrationOptions {
+    fn default() -> Self {
+        Self {
+            min_joint_range_rad: 0.05,
+            max_encoder_gap_ms: 5.0,
+            min_tip_readings: 10,
+            min_dwell_frames: 5,
+        }
+    }
+}
+
+/// Everything a calibration produced.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// The calibrated model (joint fit), ready for `params.toml`.
+    pub params: RobotParams,
+    /// The report.
+    pub report: Report,
+    /// Nominal model with the homing offsets, at the model-free latency.
+    pub nominal: CalibModel,
+    /// Result of the stepwise method.
+    pub stepwise: CalibModel,
+    /// The joint fit (model, noise, fitted observations, Jacobian, identifiability).
+    pub fit: JointFit,
+    /// The synchronised session (frames, clock, encoders, phases).
+    pub session: SessionData,
+}
+
+/// Count rate (counts/s) below which a homing frame counts as at rest.
+const DWELL_RATE: f64 = 5.0;
+
+const REQUIRED_PHASES: [(Phase, &str, &str); 4] = [
+    (Phase::Homing, "homing", "its dwell at the stops gives the joint offsets"),
+    (Phase::Excitation, "excitation", "it is the data of the fit"),
+    (Phase::Tip, "tip", "the tip sphere gives the needle length"),
+    (Phase::Validation, "validation", "it is held out to validate the model"),
+];
+
+/// Calibrates the robot of `recording`.
+pub fn calibrate(
+    recording: &Recording,
+    options: &CalibrationOptions,
+) -> Result<Calibration, CalibrationError> {
+    let started = Instant::now();
+    let robot = RobotParams::from_toml_str(&recording.robot_toml).map_err(|source| {
+        CalibrationError::RobotToml { dir: recording.dir.clone(), source }
+    })?;
+    let phases = PhaseTable::new(&recording.phases);
+    for (phase, name, why) in REQUIRED_PHASES {
+        if !phases.contains(phase) {
+            return Err(CalibrationError::MissingPhase { phase: name, why });
+        }
+    }
+    check_motion(&robot, recording, &phases, options)?;
+    let session = synchronise(recording, &robot, phases, options)?;
+    let model_free = latency::estimate(&session)?;
+    let matched = session.observations(model_free.latency_s);
+    let by_phase = |phase: Phase| -> Vec<&Observation> {
+        matched.items.iter().filter(|o| o.phase == phase).collect()
+    };
+    let dwell = homing_dwell(&by_phase(Phase::Homing));
+    if dwell.len() < options.min_dwell_frames {
+        return Err(CalibrationError::InsufficientData {
+            phase: "homing",
+            reason: format!(
+                "{} tracker frames with the robot at rest, need at least {} (the dwell at the \
+                 stops gives the joint offsets)",
+                dwell.len(),
+                options.min_dwell_frames
+            ),
+        });
+    }
+    let sets = FitSets {
+        excitation: by_phase(Phase::Excitation)
+            .into_iter()
+            .filter(|o| o.front.is_some() && o.back.is_some())
+            .collect(),
+        dwell: dwell.clone(),
+        tip: by_phase(Phase::Tip).into_iter().filter(|o| o.tip.is_some()).collect(),
+    };
+    if sets.tip.len() < options.min_tip_readings {
+        return Err(CalibrationError::InsufficientData {
+            phase: "tip",
+            reason: format!(
+                "{} tip-sphere readings, need at least {}: the needle length is not identifiable",
+                sets.tip.len(),
+                options.min_tip_readings
+            ),
+        });
+    }
+    let dwell_noise = NoiseModel::from_static(&dwell).unwrap_or_else(NoiseModel::vicra_default);
+    let nominal = nominal_model(&robot, &dwell, model_free.latency_s);
+    let stepwise_model = stepwise(&nominal, &sets, &dwell_noise)?;
+    let layout = ParamLayout::paper();
+    let fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
+
+    let validation_frames: Vec<Observation> =
+        by_phase(Phase::Validation).into_iter().cloned().collect();
+    let holds = validation_holds(&validation_frames);
+    let fitted_at_start: Vec<Observation> = matched
+        .items
+        .iter()
+        .filter(|o| crate::joint_fit::is_fitted(o))
+        .cloned()
+        .collect();
+    let final_validation: Vec<Observation> = session
+        .observations(fit.model.latency_s)
+        .items
+        .into_iter()
+        .filter(|o| o.phase == Phase::Validation)
+        .collect();
+    let final_holds = validation_holds(&final_validation);
+    let marker_tip = |model: &CalibModel, holds| TipError::of(&marker_tip_errors(model, holds, &fit.noise));
+    let residual_rms = vec![
+        model_residuals("nominal", &nominal, &fitted_at_start, &validation_frames, marker_tip(&nominal, &holds)),
+        model_residuals("stepwise", &stepwise_model, &fitted_at_start, &validation_frames, marker_tip(&stepwise_model, &holds)),
+        model_residuals("joint", &fit.model, &fit.observations, &final_validation, marker_tip(&fit.model, &final_holds)),
+    ];
+    let validation = validation_report(&fit, &final_holds);
+    let latency_index = fit.layout.ids.iter().position(|id| *id == ParamId::Latency);
+    let report = Report {
+        recording: recording.dir.display().to_string(),
+        latency_ms: fit.model.latency_s * 1e3,
+        latency_std_ms: latency_index.map_or(f64::NAN, |k| fit.analysis.std_devs[k] * 1e3),
+        time_sync: TimeSyncReport {
+            tracker_tick_ms: session.clock.period_ns * 1e-6,
+            arrival_jitter_ms: session.clock.jitter_ns * 1e-6,
+            model_free_latency_ms: model_free.latency_s * 1e3,
+            encoder_interval_ms: session.encoders.median_interval_ns() * 1e-6,
+            frames: session_stats(recording, &robot)?,
+            frames_rejected_encoder_gap: matched.rejected_encoder_gap,
+        },
+        data: DataReport {
+            dwell_frames: dwell.len(),
+            excitation_frames: sets.excitation.len(),
+            tip_readings: sets.tip.len(),
+            validation_frames: final_validation.len(),
+            validation_holds: final_holds.len(),
+            downweighted_measurements: fit.downweighted(),
+        },
+        noise: NoiseReport::new(&dwell_noise, &fit.noise),
+        residual_rms,
+        parameters: parameter_table(&layout, &nominal, &stepwise_model, &fit),
+        identifiability: IdentifiabilityReport::new(&fit),
+        validation,
+        run_time_s: 0.0,
+    };
+    let mut params = fit.model.robot.clone();
+    params.calibration = Some(sabr_model::params::CalibrationInfo {
+        latency_ms: Some(report.latency_ms),
+        source: Some(recording.dir.display().to_string()),
+        ..Default::default()
+    });
+    let mut calibration = Calibration {
+        params,
+        report,
+        nominal,
+        stepwise: stepwise_model,
+        fit,
+        session,
+    };
+    calibration.report.run_time_s = started.elapsed().as_secs_f64();
+    Ok(calibration)
+}
+
+/// Errors unless every joint covers `min_joint_range_rad` during the excitation.
+fn check_motion(
+    robot: &RobotParams,
+    recording: &Recording,
+    phases: &PhaseTable,
+    options: &CalibrationOptions,
+) -> Result<(), CalibrationError> {
+    let ranges = joint_ranges(robot, &recording.encoders, phases, Phase::Excitation);
+    match ranges.iter().position(|r| *r < options.min_joint_range_rad) {
+        Some(j) => Err(CalibrationError::TooLittleMotion {
+            joint: j + 1,
+            range_rad: ranges[j],
+            needed_rad: options.min_joint_range_rad,
+        }),
+        None => Ok(()),
+    }
+}
+
+fn session_stats(
+    recording: &Recording,
+    robot: &RobotParams,
+) -> Result<crate::frames::FrameStats, CalibrationError> {
+    Ok(measured_frames(&recording.tracker, &robot.markers.base_to_robot)?.1)
+}
+
+/// Frames, clock fit and encoder track of the recording.
+pub fn synchronise(
+    recording: &Recording,
+    robot: &RobotParams,
+    phases: PhaseTable,
+    options: &CalibrationOptions,
+) -> Result<SessionData, CalibrationError> {
+    let (frames, stats) = measured_frames(&recording.tracker, &robot.markers.base_to_robot)?;
+    if frames.is_empty() {
+        return Err(CalibrationError::NoTrackerFrames(format!(
+            "tracker.csv holds {} frames, none with the base marker and a robot tool: nothing \
+             to calibrate against",
+            stats.frames_total
+        )));
+    }
+    let counters: Vec<u32> = frames.iter().map(|f| f.frame).collect();
+    let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_ns).collect();
+    let clock = ClockFit::fit(&counters, &arrivals)?;
+    let ticks = crate::timesync::unwrap_counters(&counters)?;
+    let encoders = EncoderTrack::new(&recording.encoders, (options.max_encoder_gap_ms * 1e6) as i64)?;
+    Ok(SessionData { frames, ticks, clock, encoders, phases })
+}
+
+/// The longest run of consecutive homing frames at rest (same counts).
+fn homing_dwell<'a>(homing: &[&'a Observation]) -> Vec<&'a Observation> {
+    let mut best: Vec<&Observation> = Vec::new();
+    let mut run: Vec<&Observation> = Vec::new();
+    for obs in homing {
+        let at_rest = obs.count_rates.iter().all(|r| r.abs() < DWELL_RATE);
+        let same = run
+            .first()
+            .is_none_or(|first| first.counts.iter().zip(&obs.counts).all(|(a, b)| (a - b).abs() < 1.0));
+        if !(at_rest && same) {
+            if run.len() >= best.len() {
+                best = std::mem::take(&mut run);
+            }
+            run.clear();
+        }
+        if at_rest {
+            run.push(obs);
+        }
+    }
+    if run.len() >= best.len() {
+        best = run;
+    }
+    best
+}
+
+/// The nominal model with the offsets homing gives: `θ_off = home_stops − GR·θ_enc(dwell)`.
+fn nominal_model(robot: &RobotParams, dwell: &[&Observation], latency_s: f64) -> CalibModel {
+    let motor: Vec<[f64; 5]> = dwell
+        .iter()
+        .map(|o| robot.motor_angles_fractional(&o.counts))
+        .collect();
+    let offsets = std::array::from_fn(|j| {
+        let mut m: Vec<f64> = motor.iter().map(|v| v[j]).collect();
+        robot.joints.home_stops[j] - robot.joints.gear_ratio[j] * median(&mut m)
+    });
+    let mut robot = robot.clone();
+    robot.joints.offset = Some(offsets);
+    robot.calibration = None;
+    CalibModel { robot, latency_s }
+}
+
+fn validation_report(fit: &JointFit, holds: &[crate::validation::Hold]) -> ValidationReport {
+    let sphere = tip_sphere_error(&fit.model, holds);
+    let cross = cross_validated_tip(fit);
+    let std = TipError::of(&predicted_tip_std(fit, holds));
+    let (source, tip_error) = match sphere {
+        Some(error) => ("validation_tip_sphere", Some(error)),
+        None => ("cross_validated_tip_phase", cross),
+    };
+    ValidationReport {
+        tip_error_source: source.into(),
+        tip_error,
+        cross_validated_tip: cross,
+        predicted_tip_std: std,
+        holds: holds.len(),
+        method: format!(
+            "The validation phase is never fitted. tip_error: {}. Per model, \
+             validation_marker_tip compares the tip computed from each validation hold's mean \
+             marker poses (IK with the calibrated mountings) with the tip predicted from its \
+             encoder counts; it checks everything but the needle length. predicted_tip_std \
+             propagates the parameter covariance to the tip at the holds.",
+            if sphere.is_some() {
+                "the tip sphere at the validation holds against the predicted tip"
+            } else {
+                "the recording has no tip data in its validation phase, so this is a \
+                 cross-validated estimate: contiguous folds of the tip phase are left out in \
+                 turn, the joint solution is updated without them (one Gauss-Newton step) and \
+                 their tip readings predicted; it includes the tracker noise of the readings"
+            }
+        ),
+    }
+}

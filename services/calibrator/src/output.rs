@@ -1,0 +1,49 @@
+//! Writing the calibration outputs atomically: each file is written to a temporary file in
+//! the output directory, synced, then renamed over the target.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::calibrate::Calibration;
+use crate::html;
+
+/// Why the outputs could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot {action}: {source}", path.display())]
+pub struct OutputError {
+    /// The file or directory.
+    pub path: PathBuf,
+    /// What was being done.
+    pub action: &'static str,
+    /// The cause.
+    pub source: std::io::Error,
+}
+
+/// Writes `contents` to `path` atomically (temporary file + rename in the same directory).
+pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError> {
+    let error = |action| move |source| OutputError { path: path.to_path_buf(), action, source };
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let temporary = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
+    let mut file = std::fs::File::create(&temporary).map_err(error("create a temporary file for"))?;
+    file.write_all(contents).map_err(error("write"))?;
+    file.sync_all().map_err(error("sync"))?;
+    drop(file);
+    std::fs::rename(&temporary, path).map_err(error("rename the temporary file onto"))
+}
+
+/// Writes `params.toml`, `report.json` and `report.html` into `dir` (created if needed).
+pub fn write_outputs(calibration: &Calibration, dir: &Path) -> Result<(), OutputError> {
+    std::fs::create_dir_all(dir).map_err(|source| OutputError {
+        path: dir.to_path_buf(),
+        action: "create the output directory",
+        source,
+    })?;
+    write_atomically(&dir.join("params.toml"), calibration.params.to_toml_string().as_bytes())?;
+    let json = serde_json::to_string_pretty(&calibration.report).map_err(|e| OutputError {
+        path: dir.join("report.json"),
+        action: "serialise",
+        source: std::io::Error::other(e),
+    })?;
+    write_atomically(&dir.join("report.json"), json.as_bytes())?;
+    write_atomically(&dir.join("report.html"), html::render(&calibration.report).as_bytes())
+}

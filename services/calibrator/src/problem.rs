@@ -1,0 +1,300 @@
+//! The stacked, whitened, robustly weighted residual vector of a set of observations, its
+//! Jacobian with respect to a [`ParamLayout`], and a Levenberg–Marquardt solve.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+use sabr_model::Geometry;
+
+use crate::layout::{CalibModel, Channel, ParamLayout};
+use crate::observations::Observation;
+use crate::residuals::{
+    joint_angles, marker_poses, predict_at, raw_residual, Block, NoiseModel, Prediction,
+};
+use crate::CalibrationError;
+
+/// Whitened residual given to the rows of an observation whose kinematics fail (so that a
+/// trial step into an unreachable region is rejected instead of aborting the fit).
+const FAILED_PREDICTION_RESIDUAL: f64 = 1e3;
+/// Largest residual rows of one observation (front + back + tip).
+const MAX_ROWS_PER_OBSERVATION: usize = 15;
+/// Step (rad) of the finite differences with respect to the joint angles.
+const JOINT_STEP: f64 = 1e-7;
+
+/// A weighted least-squares problem over observations.
+#[derive(Debug, Clone, Copy)]
+pub struct Problem<'a> {
+    /// The parameters that move.
+    pub layout: &'a ParamLayout,
+    /// The fitted observations.
+    pub observations: &'a [Observation],
+    /// Residual blocks, grouped by observation in ascending order.
+    pub blocks: &'a [Block],
+    /// Total residual rows.
+    pub rows: usize,
+    /// Noise model that whitens each block.
+    pub noise: &'a NoiseModel,
+    /// Robust weight of each block (multiplies its squared residual).
+    pub weights: &'a [f64],
+}
+
+impl Problem<'_> {
+    /// The blocks of each observation, with the index of the first one.
+    fn groups(&self) -> impl Iterator<Item = (usize, &[Block])> {
+        let mut start = 0;
+        self.blocks.chunk_by(|a, b| a.obs == b.obs).map(move |group| {
+            let first = start;
+            start += group.len();
+            (first, group)
+        })
+    }
+
+    /// Writes the whitened (unweighted) residuals of one observation's blocks into `out`
+    /// (consecutively, in block order); returns the rows written.
+    fn observation_rows(&self, prediction: &Prediction, group: &[Block], out: &mut [f64]) -> usize {
+        let mut k = 0;
+        for block in group {
+            let obs = &self.observations[block.obs];
+            let dim = block.quantity.dim();
+            let raw = raw_residual(prediction, obs, block.quantity).unwrap_or([0.0; 6]);
+            self.noise.of(block.quantity).whiten(&raw, dim, &mut out[k..k + dim]);
+            k += dim;
+        }
+        k
+    }
+
+    /// The stacked weighted residual vector of `model`, and the number of observations
+    /// whose kinematics failed.
+    pub fn residuals(&self, model: &CalibModel) -> (DVector<f64>, usize) {
+        let geometry = model.robot.effective_geometry();
+        let mut r = DVector::zeros(self.rows);
+        let mut failed = 0;
+        let mut local = [0.0; MAX_ROWS_PER_OBSERVATION];
+        for (first, group) in self.groups() {
+            let obs = &self.observations[group[0].obs];
+            let q = joint_angles(model, obs);
+            match predict_at(&geometry, &model.robot.markers, q) {
+                Ok(prediction) => {
+                    self.observation_rows(&prediction, group, &mut local);
+                    self.scatter(first, group, &local, |row, value| r[row] = value);
+                }
+                Err(_) => {
+                    failed += 1;
+                    for block in group {
+                        for k in 0..block.quantity.dim() {
+                            r[block.row + k] = FAILED_PREDICTION_RESIDUAL;
+                        }
+                    }
+                }
+            }
+        }
+        (r, failed)
+    }
+
+    /// Writes the rows of `local` (one observation, block order) to their stacked rows,
+    /// scaled by the square root of each block's weight.
+    fn scatter(&self, first: usize, group: &[Block], local: &[f64], mut write: impl FnMut(usize, f64)) {
+        let mut k = 0;
+        for (i, block) in group.iter().enumerate() {
+            let scale = self.weights[first + i].sqrt();
+            for d in 0..block.quantity.dim() {
+                write(block.row + d, scale * local[k]);
+                k += 1;
+            }
+        }
+    }
+
+    /// Jacobian of [`Self::residuals`] with respect to the layout's parameters: the joint-map
+    /// parameters by the chain rule through ∂r/∂q, mountings without forward kinematics,
+    /// the geometry by forward differences of the kinematics.
+    pub fn jacobian(&self, model: &CalibModel) -> DMatrix<f64> {
+        let n = self.layout.len();
+        let mut jacobian = DMatrix::zeros(self.rows, n);
+        let geometry = model.robot.effective_geometry();
+        let perturbed: Vec<Perturbed> = self
+            .layout
+            .ids
+            .iter()
+            .map(|id| {
+                let step = id.step();
+                let mut shifted = model.clone();
+                id.set(&mut shifted, id.get(model) + step);
+                let geometry = (id.channel() == Channel::Geometry)
+                    .then(|| shifted.robot.effective_geometry());
+                Perturbed { channel: id.channel(), step, model: shifted, geometry }
+            })
+            .collect();
+        let needs_dq = perturbed.iter().any(|p| p.channel == Channel::JointMap);
+        let mut r0 = [0.0; MAX_ROWS_PER_OBSERVATION];
+        let mut r1 = [0.0; MAX_ROWS_PER_OBSERVATION];
+        let mut dr_dq = [[0.0; MAX_ROWS_PER_OBSERVATION]; 5];
+        let mut column = [0.0; MAX_ROWS_PER_OBSERVATION];
+        for (first, group) in self.groups() {
+            let obs = &self.observations[group[0].obs];
+            let q0 = joint_angles(model, obs);
+            let Ok(p0) = predict_at(&geometry, &model.robot.markers, q0) else {
+                continue;
+            };
+            let rows = self.observation_rows(&p0, group, &mut r0);
+            if needs_dq {
+                for (j, derivative) in dr_dq.iter_mut().enumerate() {
+                    let mut q = q0;
+                    q[j] += JOINT_STEP;
+                    if let Ok(p) = predict_at(&geometry, &model.robot.markers, q) {
+                        self.observation_rows(&p, group, &mut r1);
+                        for k in 0..rows {
+                            derivative[k] = (r1[k] - r0[k]) / JOINT_STEP;
+                        }
+                    }
+                }
+            }
+            for (col, p) in perturbed.iter().enumerate() {
+                let ok = match p.channel {
+                    Channel::JointMap => {
+                        let q = joint_angles(&p.model, obs);
+                        column[..rows].fill(0.0);
+                        for j in 0..5 {
+                            let dq = (q[j] - q0[j]) / p.step;
+                            if dq != 0.0 {
+                                for k in 0..rows {
+                                    column[k] += dr_dq[j][k] * dq;
+                                }
+                            }
+                        }
+                        true
+                    }
+                    Channel::Mount => {
+                        let (front_marker, back_marker) =
+                            marker_poses(&p0.pose, &p.model.robot.markers);
+                        let shifted = Prediction { front_marker, back_marker, ..p0.clone() };
+                        self.finite_difference(&shifted, group, &r0, p.step, &mut column)
+                    }
+                    Channel::Geometry => {
+                        let geometry = p.geometry.as_ref().unwrap_or(&geometry);
+                        match predict_at(geometry, &p.model.robot.markers, q0) {
+                            Ok(shifted) => {
+                                self.finite_difference(&shifted, group, &r0, p.step, &mut column)
+                            }
+                            Err(_) => false,
+                        }
+                    }
+                };
+                if ok {
+                    self.scatter(first, group, &column, |row, value| jacobian[(row, col)] = value);
+                }
+            }
+        }
+        jacobian
+    }
+
+    fn finite_difference(
+        &self,
+        shifted: &Prediction,
+        group: &[Block],
+        r0: &[f64],
+        step: f64,
+        column: &mut [f64],
+    ) -> bool {
+        let rows = self.observation_rows(shifted, group, column);
+        for k in 0..rows {
+            column[k] = (column[k] - r0[k]) / step;
+        }
+        true
+    }
+}
+
+/// A model with one parameter shifted by its finite-difference step.
+struct Perturbed {
+    channel: Channel,
+    step: f64,
+    model: CalibModel,
+    geometry: Option<Geometry>,
+}
+
+/// Result of a Levenberg–Marquardt solve.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// The fitted model.
+    pub model: CalibModel,
+    /// Weighted cost `½ Σ r²` at the solution.
+    pub cost: f64,
+    /// Residual evaluations used.
+    pub evaluations: usize,
+}
+
+struct LmAdapter<'a> {
+    problem: Problem<'a>,
+    template: CalibModel,
+    x: DVector<f64>,
+}
+
+impl LmAdapter<'_> {
+    fn model(&self) -> CalibModel {
+        let mut model = self.template.clone();
+        self.problem.layout.apply(&mut model, &self.x);
+        model
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for LmAdapter<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        Some(self.problem.residuals(&self.model()).0)
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        Some(self.problem.jacobian(&self.model()))
+    }
+}
+
+/// Minimises the problem's cost with Levenberg–Marquardt from `start`. Errors when the
+/// solver reports a numerical failure or the kinematics fail at the solution.
+pub fn solve(problem: Problem<'_>, start: &CalibModel, stage: &'static str) -> Result<Solution, CalibrationError> {
+    let adapter = LmAdapter {
+        problem,
+        template: start.clone(),
+        x: problem.layout.values(start),
+    };
+    let (adapter, report) = LevenbergMarquardt::new()
+        .with_ftol(1e-10)
+        .with_xtol(1e-10)
+        .with_gtol(1e-10)
+        .with_stepbound(1.0)
+        .with_patience(10)
+        .minimize(adapter);
+    let usable = report.termination.was_successful()
+        || matches!(
+            report.termination,
+            levenberg_marquardt::TerminationReason::LostPatience
+                | levenberg_marquardt::TerminationReason::NoImprovementPossible(_)
+        );
+    if !usable {
+        return Err(CalibrationError::Fit {
+            stage,
+            reason: format!("Levenberg–Marquardt stopped: {:?}", report.termination),
+        });
+    }
+    let model = adapter.model();
+    let (_, failed) = problem.residuals(&model);
+    if failed > 0 {
+        return Err(CalibrationError::Fit {
+            stage,
+            reason: format!("the fitted model cannot reach {failed} of the measured poses"),
+        });
+    }
+    Ok(Solution {
+        model,
+        cost: report.objective_function,
+        evaluations: report.number_of_evaluations,
+    })
+}

@@ -1,0 +1,196 @@
+//! The needle roll of robot-model.md §4: the directions `v ⊥ z_N` from the needle line to the
+//! back gimbal centre `p_b = p_r + d_offset·v` for which the needle line, `p_b` and the back
+//! gimbal axis `a_b ∥ P·p_b` (`P = diag(0, 1, 1)`) lie in one plane.
+//!
+//! With `v = cos φ e1 + sin φ e2` the plane condition `det[z_N, v, P·p_b] = 0` reads
+//! `A c + B s + C c² + D c s + E s² = 0` (`c = cos φ`, `s = sin φ`), a trigonometric polynomial
+//! of degree 2 with at most 4 roots. They are bracketed by sampling φ at
+//! [`SAMPLES`] points and polished by safeguarded Newton steps. In the robot's workspace the
+//! linear part (amplitude ≈ |P·p_r| ≈ 90 mm) dominates the quadratic part (≤ d_offset), so
+//! the two roots are about π apart; roots closer than 2π/[`SAMPLES`] (a near-singular,
+//! far-outside pose) may be missed, which makes such a target unreachable, never wrong.
+
+use std::f64::consts::TAU;
+
+use nalgebra::Vector3;
+
+/// Largest number of roots of a degree-2 trigonometric polynomial.
+pub(super) const MAX_ROOTS: usize = 4;
+/// Number of φ samples used to bracket the roots.
+const SAMPLES: usize = 32;
+/// Newton iterations allowed per root (it converges in 3–6).
+const MAX_ITERATIONS: usize = 60;
+
+/// `A c + B s + C c² + D c s + E s²`.
+struct PlaneCondition {
+    a: f64,
+    b: f64,
+    c: f64,
+    d: f64,
+    e: f64,
+}
+
+impl PlaneCondition {
+    fn value(&self, cos: f64, sin: f64) -> f64 {
+        self.a * cos + self.b * sin + cos * (self.c * cos + self.d * sin) + self.e * sin * sin
+    }
+
+    /// Derivative with respect to φ.
+    fn slope(&self, cos: f64, sin: f64) -> f64 {
+        -self.a * sin
+            + self.b * cos
+            + 2.0 * (self.e - self.c) * cos * sin
+            + self.d * (cos * cos - sin * sin)
+    }
+
+    /// The root in `[low, high]`, where the condition changes sign, by Newton steps that fall
+    /// back to bisection when they leave the bracket.
+    fn root_between(&self, mut low: f64, mut high: f64, value_low: f64) -> f64 {
+        let rising = value_low < 0.0;
+        let mut phi = 0.5 * (low + high);
+        for _ in 0..MAX_ITERATIONS {
+            let (sin, cos) = phi.sin_cos();
+            let value = self.value(cos, sin);
+            if value == 0.0 {
+                return phi;
+            }
+            if (value < 0.0) == rising {
+                low = phi;
+            } else {
+                high = phi;
+            }
+            let slope = self.slope(cos, sin);
+            let newton = phi - value / slope;
+            let next = if newton > low && newton < high {
+                newton
+            } else {
+                0.5 * (low + high)
+            };
+            let converged = (next - phi).abs() <= 1e-15 * (1.0 + phi.abs());
+            phi = next;
+            if converged || high - low <= 1e-15 {
+                break;
+            }
+        }
+        phi
+    }
+}
+
+/// Up to [`MAX_ROOTS`] unit vectors `v`.
+pub(super) struct Directions {
+    items: [Vector3<f64>; MAX_ROOTS],
+    len: usize,
+}
+
+impl Directions {
+    /// The directions found.
+    pub(super) fn iter(&self) -> impl Iterator<Item = &Vector3<f64>> {
+        self.items[..self.len].iter()
+    }
+
+    fn push(&mut self, v: Vector3<f64>) {
+        if self.len < MAX_ROOTS {
+            self.items[self.len] = v;
+            self.len += 1;
+        }
+    }
+}
+
+/// An orthonormal pair `e1, e2` with `e1 × e2 = z` (z a unit vector).
+fn perpendicular_basis(z: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let helper = if z.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let e1 = (helper - helper.dot(z) * z).normalize();
+    (e1, z.cross(&e1))
+}
+
+/// All directions `v ⊥ z` (unit) for which `p_b = p_r + offset·v` satisfies the gimbal plane
+/// condition. `p_r` in mm (`Bb`), `z` the unit needle direction, `offset` = `d_offset` (mm).
+pub(super) fn gimbal_plane_directions(
+    p_r: &Vector3<f64>,
+    z: &Vector3<f64>,
+    offset: f64,
+) -> Directions {
+    let (e1, e2) = perpendicular_basis(z);
+    // det[z, v, P p_r] = v · (P p_r × z)
+    let k = Vector3::new(0.0, p_r.y, p_r.z).cross(z);
+    // det[z, v, P v] = −v_x · v·(x̂ × z)
+    let m = Vector3::new(0.0, -z.z, z.y);
+    let (a1, b1, p1, q1) = (e1.x, e2.x, e1.dot(&m), e2.dot(&m));
+    let condition = PlaneCondition {
+        a: e1.dot(&k),
+        b: e2.dot(&k),
+        c: -offset * a1 * p1,
+        d: -offset * (a1 * q1 + b1 * p1),
+        e: -offset * b1 * q1,
+    };
+
+    let mut roots = Directions {
+        items: [Vector3::zeros(); MAX_ROOTS],
+        len: 0,
+    };
+    let step = TAU / SAMPLES as f64;
+    let (step_sin, step_cos) = step.sin_cos();
+    let (mut cos, mut sin) = (1.0, 0.0);
+    let mut value = condition.value(cos, sin);
+    for k in 0..SAMPLES {
+        let low = k as f64 * step;
+        let (next_cos, next_sin) = (
+            cos * step_cos - sin * step_sin,
+            sin * step_cos + cos * step_sin,
+        );
+        let next_value = condition.value(next_cos, next_sin);
+        let phi = if value == 0.0 {
+            Some(low)
+        } else if (value < 0.0) != (next_value < 0.0) && next_value != 0.0 {
+            Some(condition.root_between(low, low + step, value))
+        } else {
+            None
+        };
+        if let Some(phi) = phi {
+            let (s, c) = phi.sin_cos();
+            roots.push(c * e1 + s * e2);
+        }
+        (cos, sin, value) = (next_cos, next_sin, next_value);
+    }
+    roots
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// At home (needle along +z, p_r = (0, −90, 0), d_offset = 20) the condition is
+    /// `v_x (−90 + 20 v_y) = 0`: exactly the two rolls v = (0, ±1, 0).
+    #[test]
+    fn home_has_the_two_vertical_rolls() {
+        let roots = gimbal_plane_directions(&Vector3::new(0.0, -90.0, 0.0), &Vector3::z(), 20.0);
+        let mut ys: Vec<f64> = roots.iter().map(|v| v.y).collect();
+        ys.sort_by(f64::total_cmp);
+        assert_eq!(ys.len(), 2);
+        assert!(
+            (ys[0] + 1.0).abs() < 1e-12 && (ys[1] - 1.0).abs() < 1e-12,
+            "{ys:?}"
+        );
+        assert!(roots.iter().all(|v| v.x.abs() < 1e-12 && v.z.abs() < 1e-12));
+    }
+
+    /// Every root found satisfies the plane condition det[z, v, P(p_r + d v)] = 0 and is ⊥ z.
+    #[test]
+    fn roots_satisfy_the_plane_condition() {
+        let z = Vector3::new(0.1, -0.2, 0.97).normalize();
+        let p_r = Vector3::new(4.0, -80.0, 6.0);
+        let roots = gimbal_plane_directions(&p_r, &z, 20.0);
+        assert!(roots.iter().count() >= 2);
+        for v in roots.iter() {
+            let p_b = p_r + 20.0 * v;
+            let projected = Vector3::new(0.0, p_b.y, p_b.z);
+            let det = z.dot(&v.cross(&projected));
+            assert!(det.abs() < 1e-10, "{det}");
+            assert!(v.dot(&z).abs() < 1e-12 && (v.norm() - 1.0).abs() < 1e-12);
+        }
+    }
+}

@@ -1,0 +1,75 @@
+//! The planar 5-bar of each stage (paper eqs. 1, 2 and 12): the effector point
+//! `l (cos θp, sin θp) + l (cos θd, sin θd) + l_e (cos(θd − π/4), sin(θd − π/4))`.
+
+use std::f64::consts::FRAC_1_SQRT_2;
+
+use crate::Geometry;
+
+/// One stage: proximal link `l` on joint θp, distal link `l` plus the effector extension `l_e`
+/// at −45° on joint θd. Lengths in mm.
+pub(super) struct FiveBar {
+    l: f64,
+    l_e: f64,
+    /// Length of the combined distal vector `l + l_e·e^{−iπ/4}` (mm).
+    distal: f64,
+    /// Angle of that vector relative to θd (rad).
+    distal_angle: f64,
+}
+
+impl FiveBar {
+    fn new(l: f64, l_e: f64) -> Self {
+        let along = l + l_e * FRAC_1_SQRT_2;
+        let across = -l_e * FRAC_1_SQRT_2;
+        Self {
+            l,
+            l_e,
+            distal: along.hypot(across),
+            distal_angle: across.atan2(along),
+        }
+    }
+
+    /// The front stage (θ1, θ2), in the x-y plane of `Bf`.
+    pub(super) fn front(geometry: &Geometry) -> Self {
+        Self::new(geometry.l_f, geometry.l_fe)
+    }
+
+    /// The back stage (θ4, θ5), in its own plane before the θ3 turn.
+    pub(super) fn back(geometry: &Geometry) -> Self {
+        Self::new(geometry.l_b, geometry.l_be)
+    }
+
+    /// Effector point (mm) for joint angles θp, θd (rad).
+    pub(super) fn forward(&self, proximal: f64, distal: f64) -> (f64, f64) {
+        let (s1, c1) = proximal.sin_cos();
+        let (s2, c2) = distal.sin_cos();
+        // cos(θd − π/4), sin(θd − π/4)
+        let (ce, se) = ((c2 + s2) * FRAC_1_SQRT_2, (s2 - c2) * FRAC_1_SQRT_2);
+        (
+            self.l * (c1 + c2) + self.l_e * ce,
+            self.l * (s1 + s2) + self.l_e * se,
+        )
+    }
+
+    /// Both joint solutions (θp, θd) (rad, not wrapped) reaching the effector point `(x, y)` (mm);
+    /// an error says why the point is out of reach.
+    pub(super) fn inverse(&self, x: f64, y: f64) -> Result<[(f64, f64); 2], String> {
+        let reach = x.hypot(y);
+        let (inner, outer) = ((self.l - self.distal).abs(), self.l + self.distal);
+        if !(reach >= inner && reach <= outer) {
+            return Err(format!(
+                "the point ({x:.3}, {y:.3}) mm is {reach:.3} mm from the base, outside the \
+                 reachable annulus [{inner:.3}, {outer:.3}] mm"
+            ));
+        }
+        let cos_spread =
+            (reach * reach + self.l * self.l - self.distal * self.distal) / (2.0 * self.l * reach);
+        let spread = cos_spread.clamp(-1.0, 1.0).acos();
+        let bearing = y.atan2(x);
+        let solve = |proximal: f64| {
+            let (s, c) = proximal.sin_cos();
+            let distal_bearing = (y - self.l * s).atan2(x - self.l * c);
+            (proximal, distal_bearing - self.distal_angle)
+        };
+        Ok([solve(bearing - spread), solve(bearing + spread)])
+    }
+}

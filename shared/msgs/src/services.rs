@@ -1,0 +1,57 @@
+//! Every iceoryx2 service name of the graph, in one place (`sabr/<producer>/<topic>`).
+//!
+//! Names are relative to the domain: the domain (env `SABR_DOMAIN`) is applied through the
+//! iceoryx2 config prefix by `sabr-node`, so the same names are used in every domain.
+
+/// Publish-subscribe [`crate::EncoderSample`] from `encoders` (1 kHz).
+pub const ENCODER_SAMPLES: &str = "sabr/encoders/samples";
+/// Publish-subscribe [`crate::TrackerFrame`] from `tracker` (20 Hz).
+pub const TRACKER_FRAMES: &str = "sabr/tracker/frames";
+/// Publish-subscribe [`crate::MatchedSample`] from `sync` (one per tracker frame).
+pub const SYNC_MATCHED: &str = "sabr/sync/matched";
+/// Publish-subscribe [`crate::MotorSetpoint`] from `motion` to the rig/motor drive (1 kHz).
+pub const MOTION_SETPOINTS: &str = "sabr/motion/setpoints";
+/// Publish-subscribe [`crate::MotionStatus`] from `motion`.
+pub const MOTION_STATUS: &str = "sabr/motion/status";
+/// Publish-subscribe [`crate::PhaseMark`] from `motion`, one per finished phase.
+pub const MOTION_PHASES: &str = "sabr/motion/phases";
+/// Request-response [`crate::IkRequest`] → [`crate::IkResponse`] served by `ik`.
+pub const IK_SOLVE: &str = "sabr/ik/solve";
+/// Publish-subscribe [`crate::ParameterSetAnnouncement`] from `calibrator`.
+pub const CALIBRATOR_PARAMETERS: &str = "sabr/calibrator/parameters";
+/// Publish-subscribe [`crate::RigTruth`] from the simulated rig (tests and benchmarks only).
+pub const RIG_TRUTH: &str = "sabr/rig/truth";
+/// Publish-subscribe [`crate::Lifecycle`] from every node to the launcher: readiness,
+/// heartbeats, stopping, done.
+pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
+
+/// All publish-subscribe and request-response services above, for listings and checks.
+pub const ALL: [&str; 10] = [
+    ENCODER_SAMPLES,
+    TRACKER_FRAMES,
+    SYNC_MATCHED,
+    MOTION_SETPOINTS,
+    MOTION_STATUS,
+    MOTION_PHASES,
+    IK_SOLVE,
+    CALIBRATOR_PARAMETERS,
+    RIG_TRUTH,
+    GRAPH_LIFECYCLE,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique_and_follow_the_scheme() {
+        let mut seen = std::collections::HashSet::new();
+        for name in ALL {
+            assert!(seen.insert(name), "duplicate service name {name}");
+            let parts: Vec<&str> = name.split('/').collect();
+            assert_eq!(parts.len(), 3, "{name} is not sabr/<producer>/<topic>");
+            assert_eq!(parts[0], "sabr");
+            assert!(parts[1..].iter().all(|p| !p.is_empty()), "{name}");
+        }
+    }
+}

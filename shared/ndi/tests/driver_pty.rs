@@ -1,0 +1,243 @@
+//! End to end: the host driver against the simulated device on a real pseudo-terminal.
+
+use sabr_ndi::{
+    Baud, Command, DeviceError, DriverConfig, DriverError, HandleStatus, NdiDriver, NdiServer, Pty,
+    ServeStats, ServerMode, SimFrame, SimReading, Transform,
+};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+/// What the rig would report at frame `frame`: a fixed base, a moving front tool, a back tool
+/// seen every other frame, and the tip sphere.
+fn readings(frame: u32) -> Vec<SimReading> {
+    let f = frame as f32;
+    let pose = |x: f32| {
+        SimReading::Pose(Transform {
+            q: [0.5, -0.5, 0.5, 0.5],
+            t: [x, 20.5, -1800.0],
+            rms: 0.25,
+        })
+    };
+    vec![
+        pose(-100.0),
+        pose(0.5 * f),
+        if (frame / 3) % 2 == 1 {
+            SimReading::Missing
+        } else {
+            pose(-f)
+        },
+        SimReading::Point {
+            position: [0.25 * f, 1.0, -1500.0],
+            rms: 0.125,
+        },
+    ]
+}
+
+/// A camera at 100 Hz whose counter advances by 3 per frame, like the real log.
+fn camera() -> impl FnMut() -> Option<SimFrame> + Send {
+    let start = Instant::now();
+    move || {
+        let frame = 30 + 3 * (start.elapsed().as_millis() / 10) as u32;
+        Some(SimFrame {
+            frame,
+            readings: readings(frame),
+        })
+    }
+}
+
+struct Rig<S> {
+    path: String,
+    stop: Arc<AtomicBool>,
+    thread: JoinHandle<(NdiServer<S>, ServeStats)>,
+}
+
+fn serve<S: sabr_ndi::FrameSource + Send + 'static>(source: S) -> Rig<S> {
+    let mut pty = Pty::open().unwrap();
+    let path = pty.slave_path().to_str().unwrap().to_owned();
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let mut server = NdiServer::new(4, source);
+        let stats = pty.serve(&mut server, &flag).unwrap();
+        (server, stats)
+    });
+    Rig { path, stop, thread }
+}
+
+impl<S> Rig<S> {
+    fn shut_down(self) -> (NdiServer<S>, ServeStats) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.join().unwrap()
+    }
+}
+
+fn config(path: &str) -> DriverConfig {
+    DriverConfig {
+        reply_timeout: Duration::from_millis(200),
+        slow_timeout: Duration::from_millis(500),
+        stall_timeout: Duration::from_millis(200),
+        ..DriverConfig::new(path)
+    }
+}
+
+#[test]
+fn driver_tracks_the_simulated_device_on_a_pty() {
+    let rig = serve(camera());
+    let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
+    assert!(
+        driver.version().contains("SABR simulated Polaris"),
+        "{}",
+        driver.version()
+    );
+    let handles: Vec<(u8, u16)> = driver
+        .handles()
+        .iter()
+        .map(|h| (h.handle, h.status))
+        .collect();
+    assert_eq!(
+        handles,
+        vec![(1, 0x031), (2, 0x031), (3, 0x031), (4, 0x031)]
+    );
+
+    let mut previous: Option<sabr_ndi::Stamped> = None;
+    for _ in 0..15 {
+        let stamped = driver.next_frame().unwrap();
+        let reply = &stamped.reply;
+        let frame = reply.frame().unwrap();
+        let expected = readings(frame);
+        for (reading, want) in reply.handles.iter().zip(&expected) {
+            assert_eq!(reading.frame, Some(frame));
+            match *want {
+                SimReading::Missing => assert_eq!(reading.status, HandleStatus::Missing),
+                SimReading::Pose(t) => assert_eq!(reading.transform, Some(t)),
+                SimReading::Point { position, rms } => {
+                    assert_eq!(
+                        reading.transform,
+                        Some(Transform {
+                            q: [1.0, 0.0, 0.0, 0.0],
+                            t: position,
+                            rms
+                        })
+                    );
+                }
+            }
+        }
+        if let Some(previous) = &previous {
+            let step = frame - previous.reply.frame().unwrap();
+            assert!(step >= 3 && step.is_multiple_of(3), "frame step {step}");
+            assert!(stamped.arrival > previous.arrival);
+            assert!(stamped.arrival_ns > previous.arrival_ns);
+        }
+        previous = Some(stamped);
+    }
+    let stats = driver.stats();
+    assert_eq!(stats.frames, 15);
+    assert!(stats.polls >= 15);
+    assert_eq!(
+        (
+            stats.framing.bad_replies,
+            stats.timeouts,
+            stats.device_errors
+        ),
+        (0, 0, 0)
+    );
+
+    // The device refuses set-up commands while tracking, and the driver says so.
+    match driver.command(&Command::Pinit(1), Duration::from_millis(200)) {
+        Err(DriverError::Device { command, error }) => {
+            assert_eq!(error, DeviceError::WRONG_MODE);
+            assert_eq!(command, "PINIT:01");
+        }
+        other => panic!("expected ERROR0C, got {other:?}"),
+    }
+    driver.stop().unwrap();
+
+    // A second session (a restarted tracker process) opens the same terminal again.
+    let mut again = NdiDriver::connect(DriverConfig {
+        baud: Baud::B9600,
+        ..config(&rig.path)
+    })
+    .unwrap();
+    let frame = again.next_frame().unwrap().reply.frame().unwrap();
+    assert!(again.next_frame().unwrap().reply.frame().unwrap() > frame);
+    drop(again); // TSTOP on drop
+
+    let (server, serve_stats) = rig.shut_down();
+    assert_eq!(
+        server.mode(),
+        ServerMode::Setup,
+        "the dropped driver left tracking mode"
+    );
+    assert_eq!(serve_stats.dropped_replies, 0);
+    assert!(server.stats().tracking_replies >= 17);
+    assert_eq!(server.stats().errors, 1, "only the refused PINIT");
+}
+
+#[test]
+fn a_silent_tracker_is_a_timeout_not_a_hang() {
+    // Nobody serves the terminal: INIT, the break and the RESET wait all time out.
+    let pty = Pty::open().unwrap();
+    let path = pty.slave_path().to_str().unwrap().to_owned();
+    let started = Instant::now();
+    let result = NdiDriver::connect(config(&path));
+    let elapsed = started.elapsed();
+    assert!(
+        matches!(result, Err(DriverError::Timeout { .. })),
+        "{result:?}"
+    );
+    assert!(elapsed < Duration::from_secs(3), "took {elapsed:?}");
+}
+
+#[test]
+fn a_tracker_that_dies_mid_stream_is_noticed() {
+    let rig = serve(camera());
+    let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
+    driver.next_frame().unwrap();
+    let _ = rig.shut_down(); // closes the master side: the device is gone
+    let started = Instant::now();
+    let result = driver.next_frame();
+    assert!(
+        matches!(
+            result,
+            Err(DriverError::Io { .. } | DriverError::Timeout { .. })
+        ),
+        "{result:?}"
+    );
+    assert!(started.elapsed() < Duration::from_secs(1));
+}
+
+#[test]
+fn a_frozen_frame_counter_is_a_stall() {
+    let rig = serve(|| {
+        Some(SimFrame {
+            frame: 42,
+            readings: readings(42),
+        })
+    });
+    let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
+    assert_eq!(driver.next_frame().unwrap().reply.frame(), Some(42));
+    let started = Instant::now();
+    match driver.next_frame() {
+        Err(DriverError::Stalled { last_frame, waited }) => {
+            assert_eq!(last_frame, Some(42));
+            assert!(waited > Duration::from_millis(200));
+        }
+        other => panic!("expected a stall, got {other:?}"),
+    }
+    assert!(started.elapsed() < Duration::from_secs(2));
+    assert!(driver.stats().polls > 10);
+    drop(driver);
+    let (server, _) = rig.shut_down();
+    assert_eq!(server.mode(), ServerMode::Setup);
+}
+
+#[test]
+fn bx_options_without_frame_numbers_are_refused() {
+    let result = NdiDriver::connect(DriverConfig {
+        options: sabr_ndi::ReplyOptions::PASSIVE_STRAYS,
+        ..config("/nonexistent")
+    });
+    assert!(matches!(result, Err(DriverError::Config(_))), "{result:?}");
+}

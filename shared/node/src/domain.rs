@@ -1,0 +1,129 @@
+//! The domain that isolates one running graph from every other, and the one iceoryx2 config.
+
+use crate::NodeError;
+use iceoryx2::config::Config;
+use iceoryx2::prelude::{FileName, SemanticString};
+
+/// Environment variable naming the domain of the graph (set by the launcher).
+pub const DOMAIN_ENV: &str = "SABR_DOMAIN";
+/// Domain used when [`DOMAIN_ENV`] is unset.
+pub const DEFAULT_DOMAIN: &str = "sabr";
+/// Longest accepted domain name, in bytes.
+pub const MAX_DOMAIN_LEN: usize = 40;
+
+/// A validated domain name: 1..=40 ASCII letters, digits or `-`.
+///
+/// Every iceoryx2 resource (shared memory, node and service files) of the domain is named with
+/// the prefix [`Domain::file_prefix`], so graphs in different domains never see each other.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct Domain(String);
+
+impl Domain {
+    /// Validates a domain name.
+    pub fn new(name: &str) -> Result<Self, NodeError> {
+        let reason = if name.is_empty() {
+            Some("it is empty")
+        } else if name.len() > MAX_DOMAIN_LEN {
+            Some("it is longer than 40 bytes")
+        } else if !name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'-') {
+            Some("only ASCII letters, digits and '-' are allowed")
+        } else {
+            None
+        };
+        match reason {
+            Some(reason) => Err(NodeError::InvalidDomain {
+                value: name.to_owned(),
+                reason,
+            }),
+            None => Ok(Self(name.to_owned())),
+        }
+    }
+
+    /// The domain from [`DOMAIN_ENV`], or [`DEFAULT_DOMAIN`] when it is unset.
+    pub fn from_env() -> Result<Self, NodeError> {
+        match std::env::var(DOMAIN_ENV) {
+            Ok(name) => Self::new(&name),
+            Err(std::env::VarError::NotPresent) => Self::new(DEFAULT_DOMAIN),
+            Err(std::env::VarError::NotUnicode(_)) => Err(NodeError::InvalidDomain {
+                value: format!("{:?}", std::env::var_os(DOMAIN_ENV)),
+                reason: "it is not valid UTF-8",
+            }),
+        }
+    }
+
+    /// The domain name.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// Prefix of every iceoryx2 file of this domain (`<domain>_`), e.g. in `/dev/shm`.
+    ///
+    /// `_` cannot occur in a domain, so no domain's prefix is a prefix of another's.
+    pub fn file_prefix(&self) -> String {
+        format!("{}_", self.0)
+    }
+
+    /// The one iceoryx2 configuration every process of the domain uses.
+    ///
+    /// Built in code (no config file is read), so all processes agree: the domain prefix, dead
+    /// node cleanup on node creation and service open, and port capacities sized for a 1 kHz
+    /// stream read every few milliseconds by up to 16 subscribers.
+    pub fn iceoryx_config(&self) -> Config {
+        let mut config = Config::default();
+        // The prefix is at most 41 ASCII bytes, always a valid file name.
+        if let Ok(prefix) = FileName::new(self.file_prefix().as_bytes()) {
+            config.global.prefix = prefix;
+        }
+        config.global.node.cleanup_dead_nodes_on_creation = true;
+        config.global.node.cleanup_dead_nodes_on_destruction = true;
+        config.global.service.cleanup_dead_nodes_on_open = true;
+
+        let pubsub = &mut config.defaults.publish_subscribe;
+        pubsub.max_publishers = 4;
+        pubsub.max_subscribers = 16;
+        pubsub.max_nodes = 32;
+        pubsub.subscriber_max_buffer_size = 256;
+        pubsub.subscriber_max_borrowed_samples = 4;
+        pubsub.publisher_max_loaned_samples = 4;
+        pubsub.publisher_history_size = 1;
+        pubsub.enable_safe_overflow = true;
+
+        let event = &mut config.defaults.event;
+        event.max_listeners = 16;
+        event.max_notifiers = 16;
+        event.max_nodes = 32;
+
+        let rr = &mut config.defaults.request_response;
+        rr.max_clients = 16;
+        rr.max_servers = 2;
+        rr.max_nodes = 32;
+        config
+    }
+}
+
+impl std::fmt::Display for Domain {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accepts_letters_digits_and_dashes() {
+        let domain = Domain::new("test-42-abc").unwrap();
+        assert_eq!(domain.file_prefix(), "test-42-abc_");
+        let config = domain.iceoryx_config();
+        assert_eq!(config.global.prefix.as_bytes(), b"test-42-abc_");
+    }
+
+    #[test]
+    fn rejects_empty_long_and_odd_names() {
+        for bad in ["", "a_b", "a/b", "a b", &"x".repeat(MAX_DOMAIN_LEN + 1)] {
+            let error = Domain::new(bad).unwrap_err();
+            assert!(matches!(error, NodeError::InvalidDomain { .. }), "{bad:?}");
+        }
+    }
+}

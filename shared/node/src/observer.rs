@@ -1,0 +1,128 @@
+//! Watching the nodes of a domain from outside the graph (the launcher, tests).
+
+use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
+use crate::{Domain, NodeError};
+use iceoryx2::node::Node;
+use iceoryx2::prelude::{ipc, NodeBuilder};
+use sabr_msgs::{services, Lifecycle};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// An iceoryx2 node that receives every node's lifecycle announcements of a domain and can
+/// clean up after dead nodes. It does not announce itself.
+pub struct GraphObserver {
+    node: Node<ipc::Service>,
+    lifecycle: iceoryx2::port::subscriber::Subscriber<ipc::Service, Lifecycle, ()>,
+}
+
+impl GraphObserver {
+    /// Joins `domain` (creating the lifecycle service) and removes stale resources of dead
+    /// nodes. Catches SIGINT/SIGTERM: see [`GraphObserver::wait`].
+    pub fn new(domain: &Domain) -> Result<Self, NodeError> {
+        let node = NodeBuilder::new()
+            .config(&domain.iceoryx_config())
+            .create::<ipc::Service>()
+            .map_err(|e| NodeError::Node(e.to_string()))?;
+        let lifecycle = lifecycle_service(&node)?
+            .subscriber_builder()
+            .buffer_size(LIFECYCLE_BUFFER)
+            .create()
+            .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "create subscriber", e))?;
+        let observer = Self { node, lifecycle };
+        observer.cleanup_dead_nodes();
+        Ok(observer)
+    }
+
+    /// Hands every lifecycle announcement received since the last call to `f`, oldest first.
+    pub fn poll(&self, mut f: impl FnMut(Lifecycle)) -> Result<usize, NodeError> {
+        let mut count = 0;
+        loop {
+            let sample = self
+                .lifecycle
+                .receive()
+                .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "receive", e))?;
+            match sample {
+                Some(sample) => {
+                    f(*sample.payload());
+                    count += 1;
+                }
+                None => return Ok(count),
+            }
+        }
+    }
+
+    /// Sleeps up to `duration`; `false` if SIGINT or SIGTERM arrived (once per signal).
+    pub fn wait(&self, duration: Duration) -> bool {
+        self.node.wait(duration).is_ok()
+    }
+
+    /// Removes the iceoryx2 resources of nodes whose process died (e.g. by SIGKILL), waiting
+    /// briefly for any other process doing the same; returns how many nodes were removed.
+    pub fn cleanup_dead_nodes(&self) -> u64 {
+        let state = self
+            .node
+            .blocking_cleanup_dead_nodes(Duration::from_millis(500));
+        if state.failed_cleanups > 0 {
+            tracing::warn!(
+                failed = state.failed_cleanups,
+                "could not remove the resources of some dead nodes"
+            );
+        }
+        state.cleanups
+    }
+
+    /// The underlying iceoryx2 node.
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+}
+
+/// Every file of `domain` in `/dev/shm` and in the iceoryx2 root directory (sorted): after a
+/// clean shutdown of the whole domain this is empty.
+pub fn domain_files(domain: &Domain) -> Vec<PathBuf> {
+    let prefix = domain.file_prefix();
+    let config = domain.iceoryx_config();
+    let root = PathBuf::from(config.global.root_path().to_string());
+    let mut found = Vec::new();
+    let mut stack = vec![PathBuf::from("/dev/shm"), root];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if entry.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(path);
+            } else if entry.file_name().to_string_lossy().starts_with(&prefix) {
+                found.push(path);
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// Removes what iceoryx2 keeps of `domain` once no node of it exists (alive or dead): the
+/// per-domain node-counter segment `…global_mgmt`, which iceoryx2 never removes by itself.
+/// Returns the files of the domain still left, which should be none.
+///
+/// Only the owner of the domain (the launcher, after its graph stopped) may call this: a node
+/// starting at the same moment would lose its node counter.
+pub fn release_domain(domain: &Domain) -> Vec<PathBuf> {
+    let config = domain.iceoryx_config();
+    let mut nodes = 0usize;
+    let listed = Node::<ipc::Service>::list(&config, |_| {
+        nodes += 1;
+        iceoryx2::prelude::CallbackProgression::Continue
+    });
+    if listed.is_ok() && nodes == 0 {
+        for file in domain_files(domain) {
+            if file.to_string_lossy().ends_with(".global_mgmt") {
+                if let Err(error) = std::fs::remove_file(&file) {
+                    tracing::warn!(file = %file.display(), %error, "cannot remove");
+                }
+            }
+        }
+    }
+    domain_files(domain)
+}

@@ -1,0 +1,502 @@
+//! [`NodeRuntime`]: the iceoryx2 node of one process, its lifecycle and its main loops.
+
+use crate::ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
+use crate::{monotonic_ns, Domain, NodeError};
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::{
+    ipc, CallbackProgression, NodeBuilder, NodeName, ServiceName, WaitSetAttachmentId,
+    WaitSetBuilder,
+};
+use iceoryx2::waitset::WaitSetRunResult;
+use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Environment variable holding the node's name in the launch file (set by the launcher).
+pub const NODE_NAME_ENV: &str = "SABR_NODE_NAME";
+/// Environment variable holding the run directory `runs/<id>` (set by the launcher).
+pub const RUN_DIR_ENV: &str = "SABR_RUN_DIR";
+/// How often a running node repeats its `Ready` lifecycle announcement (its heartbeat).
+pub const HEARTBEAT_PERIOD: Duration = Duration::from_millis(100);
+/// Publisher capacity of the lifecycle service: one per node process plus spares for restarts.
+const LIFECYCLE_MAX_PUBLISHERS: usize = 64;
+/// Subscriber capacity of the lifecycle service (the launcher and a few watchers).
+const LIFECYCLE_MAX_SUBSCRIBERS: usize = 8;
+/// Buffer of a lifecycle subscriber: several seconds of heartbeats of a whole graph.
+pub(crate) const LIFECYCLE_BUFFER: usize = 256;
+
+/// The run directory given by the launcher ([`RUN_DIR_ENV`]), where recorder and calibrator
+/// write; `None` when the process was started by hand without it.
+pub fn run_dir() -> Option<PathBuf> {
+    std::env::var_os(RUN_DIR_ENV).map(PathBuf::from)
+}
+
+/// Why a main loop returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Exit {
+    /// SIGINT or SIGTERM arrived (the launcher's stop request, or Ctrl-C).
+    Signal,
+    /// The loop body called [`LoopCtx::stop`].
+    Stopped,
+    /// The loop body called [`LoopCtx::finish_graph`]: the graph's job is done.
+    Done,
+}
+
+/// What the loop body sees on each call, and how it ends the loop.
+#[derive(Debug)]
+pub struct LoopCtx {
+    tick: u64,
+    now: Instant,
+    woke_on_data: bool,
+    missed: u64,
+    exit: Option<Exit>,
+}
+
+impl LoopCtx {
+    fn new() -> Self {
+        Self {
+            tick: 0,
+            now: Instant::now(),
+            woke_on_data: false,
+            missed: 0,
+            exit: None,
+        }
+    }
+
+    /// Number of body calls before this one.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+
+    /// When this call started.
+    pub fn now(&self) -> Instant {
+        self.now
+    }
+
+    /// In [`NodeRuntime::run_on_data`]: true if an input woke the loop, false on an idle timeout.
+    pub fn woke_on_data(&self) -> bool {
+        self.woke_on_data
+    }
+
+    /// In [`NodeRuntime::run_loop`]: periods skipped so far because the body overran.
+    pub fn missed_periods(&self) -> u64 {
+        self.missed
+    }
+
+    /// Leave the loop after this call.
+    pub fn stop(&mut self) {
+        self.exit = Some(Exit::Stopped);
+    }
+
+    /// Announce that the graph's job is done (the launcher then stops the graph with success)
+    /// and leave the loop after this call.
+    pub fn finish_graph(&mut self) {
+        self.exit = Some(Exit::Done);
+    }
+}
+
+/// The runtime of one SABR process: iceoryx2 node in the graph's domain, typed ports,
+/// lifecycle announcements (readiness, heartbeat, stopping, done) and signal-aware loops.
+///
+/// ```no_run
+/// use sabr_node::NodeRuntime;
+/// use sabr_msgs::{services, EncoderSample};
+/// use std::time::Duration;
+///
+/// fn main() -> Result<(), sabr_node::NodeError> {
+///     let mut rt = NodeRuntime::start("encoders")?;
+///     let out = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES)?;
+///     let mut seq = 0;
+///     rt.run_loop(Duration::from_millis(1), |_ctx| {
+///         seq += 1;
+///         out.send(EncoderSample { seq, t_ns: sabr_node::monotonic_ns(), counts: [0; 5] })
+///     })?;
+///     Ok(())
+/// }
+/// ```
+pub struct NodeRuntime {
+    node: Node<ipc::Service>,
+    name: String,
+    label: NodeLabel,
+    domain: Domain,
+    lifecycle: iceoryx2::port::publisher::Publisher<ipc::Service, Lifecycle, ()>,
+    lifecycle_seq: u64,
+    state: LifecycleState,
+    last_heartbeat: Instant,
+    stop_requested: bool,
+}
+
+impl NodeRuntime {
+    /// Starts the runtime of a service process: logging to stderr, the node name from
+    /// [`NODE_NAME_ENV`] (else `default_name`), the domain from [`crate::DOMAIN_ENV`], stale
+    /// resources of dead nodes removed, SIGINT/SIGTERM caught, `Starting` announced.
+    pub fn start(default_name: &str) -> Result<Self, NodeError> {
+        crate::init_tracing();
+        let name = std::env::var(NODE_NAME_ENV).unwrap_or_else(|_| default_name.to_owned());
+        Self::with_domain(&name, Domain::from_env()?)
+    }
+
+    /// Like [`NodeRuntime::start`] with an explicit name and domain, ignoring the environment
+    /// (and leaving logging set-up to the caller).
+    pub fn with_domain(name: &str, domain: Domain) -> Result<Self, NodeError> {
+        let label = validate_node_name(name)?;
+        let node_name = NodeName::new(name).map_err(|e| NodeError::InvalidName {
+            name: name.to_owned(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&domain.iceoryx_config())
+            .create::<ipc::Service>()
+            .map_err(|e| NodeError::Node(e.to_string()))?;
+        // Creation already removed dead nodes; a second pass waits for any other process that
+        // was cleaning up at the same moment.
+        let cleanup = node.blocking_cleanup_dead_nodes(Duration::from_millis(500));
+        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
+            tracing::info!(
+                removed = cleanup.cleanups,
+                failed = cleanup.failed_cleanups,
+                "removed stale iceoryx2 resources of dead nodes"
+            );
+        }
+        // Installs iceoryx2's SIGINT/SIGTERM handler now rather than at the first wait, so a stop
+        // request during set-up is seen instead of killing the process.
+        let stop_requested = node.wait(Duration::ZERO).is_err();
+        let lifecycle = lifecycle_service(&node)?
+            .publisher_builder()
+            .create()
+            .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "create publisher", e))?;
+        let mut runtime = Self {
+            node,
+            name: name.to_owned(),
+            label,
+            domain,
+            lifecycle,
+            lifecycle_seq: 0,
+            state: LifecycleState::Starting,
+            last_heartbeat: Instant::now(),
+            stop_requested,
+        };
+        runtime.announce(LifecycleState::Starting);
+        tracing::info!(node = name, domain = %runtime.domain, pid = std::process::id(), "starting");
+        Ok(runtime)
+    }
+
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The domain the node lives in.
+    pub fn domain(&self) -> &Domain {
+        &self.domain
+    }
+
+    /// The underlying iceoryx2 node, for anything the helpers below do not cover.
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    /// A publisher of `T` on a publish-subscribe service (see `sabr_msgs::services`).
+    pub fn publisher<T: Message>(&self, service: &str) -> Result<Publisher<T>, NodeError> {
+        let port = self
+            .node
+            .service_builder(&service_name(service)?)
+            .publish_subscribe::<T>()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?
+            .publisher_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create publisher", e))?;
+        Ok(Publisher::new(port, self.notifier(service)?, service))
+    }
+
+    /// A subscriber of `T` on a publish-subscribe service, woken by its publishers.
+    pub fn subscriber<T: Message>(&self, service: &str) -> Result<Subscriber<T>, NodeError> {
+        let port = self
+            .node
+            .service_builder(&service_name(service)?)
+            .publish_subscribe::<T>()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create subscriber", e))?;
+        Ok(Subscriber::new(port, self.listener(service)?, service))
+    }
+
+    /// A client of a request-response service (e.g. `services::IK_SOLVE`).
+    pub fn client<Req: Message, Resp: Message>(
+        &self,
+        service: &str,
+    ) -> Result<Client<Req, Resp>, NodeError> {
+        self.node
+            .service_builder(&service_name(service)?)
+            .request_response::<Req, Resp>()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?
+            .client_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create client", e))
+    }
+
+    /// The server of a request-response service.
+    pub fn server<Req: Message, Resp: Message>(
+        &self,
+        service: &str,
+    ) -> Result<Server<Req, Resp>, NodeError> {
+        self.node
+            .service_builder(&service_name(service)?)
+            .request_response::<Req, Resp>()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?
+            .server_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create server", e))
+    }
+
+    /// A notifier on the event service named `service` (publishers use the same name to wake
+    /// their subscribers; a request-response client may use it to wake its server).
+    pub fn notifier(&self, service: &str) -> Result<Notifier<ipc::Service>, NodeError> {
+        self.node
+            .service_builder(&service_name(service)?)
+            .event()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open event service", e))?
+            .notifier_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create notifier", e))
+    }
+
+    /// A listener on the event service named `service`.
+    pub fn listener(&self, service: &str) -> Result<Listener<ipc::Service>, NodeError> {
+        self.node
+            .service_builder(&service_name(service)?)
+            .event()
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open event service", e))?
+            .listener_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create listener", e))
+    }
+
+    /// Announces readiness to the launcher: call once the ports are set up. The loops call it
+    /// on entry if it was not called before.
+    pub fn ready(&mut self) {
+        if self.state == LifecycleState::Starting {
+            self.announce(LifecycleState::Ready);
+            tracing::info!(node = %self.name, "ready");
+        }
+    }
+
+    /// Announces that the graph's job is done; the launcher then stops the graph with success.
+    pub fn finish_graph(&mut self) {
+        self.announce(LifecycleState::Done);
+        tracing::info!(node = %self.name, "announced the graph's job done");
+    }
+
+    /// False once a stop was requested (SIGINT/SIGTERM). Also sends the heartbeat when due:
+    /// a hand-written loop calls this every iteration.
+    pub fn keep_running(&mut self) -> bool {
+        self.sleep(Duration::ZERO)
+    }
+
+    /// Sleeps up to `duration`, returning early with `false` on a stop request; sends the
+    /// heartbeat when due.
+    pub fn sleep(&mut self, duration: Duration) -> bool {
+        if !self.stop_requested && self.node.wait(duration).is_err() {
+            self.stop_requested = true;
+        }
+        self.heartbeat_if_due();
+        !self.stop_requested
+    }
+
+    /// Calls `body` every `period` (drift-free schedule; when the body overruns, missed
+    /// periods are skipped, not bunched) until a signal arrives or the body stops the loop.
+    pub fn run_loop<E>(
+        &mut self,
+        period: Duration,
+        mut body: impl FnMut(&mut LoopCtx) -> Result<(), E>,
+    ) -> Result<Exit, E> {
+        self.ready();
+        let mut ctx = LoopCtx::new();
+        let mut next = Instant::now();
+        loop {
+            let now = Instant::now();
+            if next > now && !self.sleep(next - now) {
+                return Ok(self.leave(Exit::Signal));
+            }
+            if !self.keep_running() {
+                return Ok(self.leave(Exit::Signal));
+            }
+            ctx.now = Instant::now();
+            body(&mut ctx)?;
+            ctx.tick += 1;
+            if let Some(exit) = ctx.exit {
+                return Ok(self.leave(exit));
+            }
+            next += period;
+            let behind = Instant::now().saturating_duration_since(next);
+            if behind >= period {
+                let skipped = (behind.as_nanos() / period.as_nanos().max(1)) as u32;
+                ctx.missed += u64::from(skipped);
+                next += period * skipped;
+            }
+        }
+    }
+
+    /// Calls `body` whenever data arrives on any of `inputs`, and after `idle` without data,
+    /// until a signal arrives or the body stops the loop. Blocks in between (no spinning); the
+    /// idle call is where a node notices a stalled or dead peer (see [`crate::Deadline`]).
+    pub fn run_on_data<E>(
+        &mut self,
+        inputs: &[&dyn Waitable],
+        idle: Duration,
+        mut body: impl FnMut(&mut LoopCtx) -> Result<(), E>,
+    ) -> Result<Exit, E> {
+        self.ready();
+        let mut ctx = LoopCtx::new();
+        let waitset = match WaitSetBuilder::new().create::<ipc::Service>() {
+            Ok(waitset) => waitset,
+            Err(error) => {
+                tracing::error!(?error, "cannot create a WaitSet; leaving the loop");
+                return Ok(self.leave(Exit::Signal));
+            }
+        };
+        let mut guards = Vec::with_capacity(inputs.len());
+        for input in inputs {
+            match waitset.attach_notification(input.wake_listener()) {
+                Ok(guard) => guards.push(guard),
+                Err(error) => {
+                    tracing::error!(?error, "cannot wait on an input; leaving the loop");
+                    return Ok(self.leave(Exit::Signal));
+                }
+            }
+        }
+        let ids: Vec<WaitSetAttachmentId<ipc::Service>> =
+            guards.iter().map(WaitSetAttachmentId::from_guard).collect();
+        let heartbeat = match waitset.attach_interval(HEARTBEAT_PERIOD) {
+            Ok(guard) => guard,
+            Err(error) => {
+                tracing::error!(?error, "cannot attach the heartbeat interval; leaving the loop");
+                return Ok(self.leave(Exit::Signal));
+            }
+        };
+        let mut last_body = Instant::now();
+        loop {
+            let mut woke_on_data = false;
+            let until_idle = idle.saturating_sub(last_body.elapsed());
+            let result = waitset.wait_and_process_once_with_timeout(
+                |id| {
+                    woke_on_data |= ids.contains(&id);
+                    CallbackProgression::Continue
+                },
+                until_idle,
+            );
+            match result {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    self.stop_requested = true;
+                }
+                Ok(_) => {}
+                Err(error) => tracing::warn!(?error, "WaitSet wait failed"),
+            }
+            if !self.keep_running() {
+                drop(heartbeat);
+                return Ok(self.leave(Exit::Signal));
+            }
+            if woke_on_data {
+                inputs.iter().for_each(|input| input.clear());
+            }
+            if woke_on_data || last_body.elapsed() >= idle {
+                ctx.now = Instant::now();
+                ctx.woke_on_data = woke_on_data;
+                body(&mut ctx)?;
+                ctx.tick += 1;
+                last_body = Instant::now();
+                if let Some(exit) = ctx.exit {
+                    return Ok(self.leave(exit));
+                }
+            }
+        }
+    }
+
+    fn leave(&mut self, exit: Exit) -> Exit {
+        match exit {
+            Exit::Done => self.finish_graph(),
+            Exit::Signal => tracing::info!(node = %self.name, "stop requested"),
+            Exit::Stopped => {}
+        }
+        exit
+    }
+
+    fn heartbeat_if_due(&mut self) {
+        if self.state == LifecycleState::Ready && self.last_heartbeat.elapsed() >= HEARTBEAT_PERIOD
+        {
+            self.announce(LifecycleState::Ready);
+        }
+    }
+
+    fn announce(&mut self, state: LifecycleState) {
+        self.state = state;
+        self.lifecycle_seq += 1;
+        self.last_heartbeat = Instant::now();
+        let message = Lifecycle {
+            node: self.label,
+            pid: std::process::id(),
+            state,
+            seq: self.lifecycle_seq,
+            t_ns: monotonic_ns(),
+        };
+        if let Err(error) = self.lifecycle.send_copy(message) {
+            tracing::warn!(?error, ?state, "cannot publish the lifecycle state");
+        }
+    }
+}
+
+impl Drop for NodeRuntime {
+    fn drop(&mut self) {
+        self.announce(LifecycleState::Stopping);
+        tracing::info!(node = %self.name, "stopped");
+    }
+}
+
+/// The lifecycle service with its fixed capacities (every process opens it identically).
+pub(crate) fn lifecycle_service(
+    node: &Node<ipc::Service>,
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, Lifecycle, ()>,
+    NodeError,
+> {
+    node.service_builder(&service_name(services::GRAPH_LIFECYCLE)?)
+        .publish_subscribe::<Lifecycle>()
+        .max_publishers(LIFECYCLE_MAX_PUBLISHERS)
+        .max_subscribers(LIFECYCLE_MAX_SUBSCRIBERS)
+        .subscriber_max_buffer_size(LIFECYCLE_BUFFER)
+        .history_size(0)
+        .open_or_create()
+        .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "open service", e))
+}
+
+pub(crate) fn service_name(service: &str) -> Result<ServiceName, NodeError> {
+    ServiceName::new(service).map_err(|e| NodeError::port(service, "parse service name", e))
+}
+
+/// Checks a node name: 1..=32 bytes of ASCII letters, digits, `-` or `_` (it names log files).
+pub fn validate_node_name(name: &str) -> Result<NodeLabel, NodeError> {
+    let invalid = |reason: &str| NodeError::InvalidName {
+        name: name.to_owned(),
+        reason: reason.to_owned(),
+    };
+    if name.is_empty() {
+        return Err(invalid("it is empty"));
+    }
+    if !name
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+    {
+        return Err(invalid("only ASCII letters, digits, '-' and '_' are allowed"));
+    }
+    NodeLabel::new(name).map_err(|e| invalid(&e.to_string()))
+}

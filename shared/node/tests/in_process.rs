@@ -1,0 +1,108 @@
+//! In-process checks of the runtime's ports, lifecycle and cleanup, each in its own domain.
+
+use sabr_msgs::{services, EncoderSample, LifecycleState};
+use sabr_node::{domain_files, release_domain, Domain, Exit, GraphObserver, NodeRuntime};
+use std::time::{Duration, Instant};
+
+fn unique_domain(test: &str) -> Domain {
+    Domain::new(&format!("t-{test}-{}", std::process::id())).unwrap()
+}
+
+/// Leaves the domain as found once every node of the test is gone.
+fn release(domain: &Domain) {
+    let left = release_domain(domain);
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+#[test]
+fn samples_flow_and_a_silent_publisher_times_out() {
+    let domain = unique_domain("flow");
+    let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
+    let publisher = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let subscriber = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let sample = EncoderSample {
+        seq: 7,
+        t_ns: sabr_node::monotonic_ns(),
+        counts: [1, -2, 3, -4, 5],
+    };
+    publisher.send(sample).unwrap();
+    let received = subscriber.recv_timeout(Duration::from_secs(1)).unwrap();
+    assert_eq!(received, Some(sample));
+
+    let start = Instant::now();
+    let nothing = subscriber
+        .recv_timeout(Duration::from_millis(50))
+        .unwrap();
+    assert_eq!(nothing, None);
+    assert!(start.elapsed() >= Duration::from_millis(50));
+    drop((publisher, subscriber, rt));
+    release(&domain);
+}
+
+#[test]
+fn run_on_data_wakes_on_samples_and_idles_without() {
+    let domain = unique_domain("wake");
+    let mut rt = NodeRuntime::with_domain("consumer", domain.clone()).unwrap();
+    let publisher = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let subscriber = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let mut seen = Vec::new();
+    let mut idle_calls = 0;
+    let exit = rt
+        .run_on_data(&[&subscriber], Duration::from_millis(20), |ctx| {
+            if ctx.woke_on_data() {
+                subscriber.drain(|s| seen.push(s.seq))?;
+            } else {
+                idle_calls += 1;
+            }
+            match ctx.tick() {
+                // The first call is an idle timeout; then send one sample per call.
+                0..=2 => publisher.send(EncoderSample {
+                    seq: ctx.tick(),
+                    ..Default::default()
+                })?,
+                _ => ctx.stop(),
+            }
+            Ok::<_, sabr_node::NodeError>(())
+        })
+        .unwrap();
+    assert_eq!(exit, Exit::Stopped);
+    assert_eq!(seen, vec![0, 1, 2]);
+    assert_eq!(idle_calls, 1);
+    drop((publisher, subscriber, rt));
+    release(&domain);
+}
+
+#[test]
+fn observer_sees_lifecycle_and_a_clean_exit_leaves_no_files() {
+    let domain = unique_domain("life");
+    assert!(domain_files(&domain).is_empty(), "domain not fresh");
+    {
+        let observer = GraphObserver::new(&domain).unwrap();
+        let mut rt = NodeRuntime::with_domain("worker", domain.clone()).unwrap();
+        let mut states = Vec::new();
+        let mut record = |m: sabr_msgs::Lifecycle| {
+            assert_eq!(m.node.as_str(), "worker");
+            assert_eq!(m.pid, std::process::id());
+            states.push(m.state);
+        };
+        observer.poll(&mut record).unwrap();
+        rt.ready();
+        rt.finish_graph();
+        observer.poll(&mut record).unwrap();
+        drop(rt);
+        observer.poll(&mut record).unwrap();
+        assert_eq!(
+            states,
+            [
+                LifecycleState::Starting,
+                LifecycleState::Ready,
+                LifecycleState::Done,
+                LifecycleState::Stopping
+            ]
+        );
+        assert!(!domain_files(&domain).is_empty(), "observer should own files");
+    }
+    let left = release_domain(&domain);
+    assert!(left.is_empty(), "left behind: {left:?}");
+    assert!(domain_files(&domain).is_empty());
+}
