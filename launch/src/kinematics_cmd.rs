@@ -191,8 +191,7 @@ struct ColumnReader {
 
 impl ColumnReader {
     fn open(path: &Path, names: &[&str]) -> anyhow::Result<Self> {
-        let file =
-            File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
         let mut reader = csv::ReaderBuilder::new().flexible(true).from_reader(file);
         let header = reader
             .headers()

@@ -2,8 +2,12 @@
 
 use clap::{Parser, Subcommand};
 
+mod bench;
+mod calibrate_cmd;
 mod kinematics_cmd;
 mod sim_cmd;
+
+use sabr::launcher;
 
 /// Command-line interface of the SABR robot software.
 #[derive(Debug, Parser)]
@@ -21,6 +25,12 @@ enum Command {
     Ik(kinematics_cmd::IkArgs),
     /// Simulated rig: `sabr sim record` writes a simulated session and its truth.
     Sim(sim_cmd::SimArgs),
+    /// Launch a process graph from a TOML launch file and supervise it until it stops.
+    Launch(launcher::LaunchArgs),
+    /// Latency and compute benchmarks: ping-pong baselines, FK/IK, sim record, calibrate.
+    Bench(bench::BenchArgs),
+    /// Calibrate the robot from a recording: params.toml, report.json, report.html.
+    Calibrate(calibrate_cmd::CalibrateArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +39,9 @@ fn main() -> std::process::ExitCode {
         Command::Fk(args) => kinematics_cmd::run_fk(&args),
         Command::Ik(args) => kinematics_cmd::run_ik(&args),
         Command::Sim(args) => sim_cmd::run(&args),
+        Command::Launch(args) => launcher::run(&args),
+        Command::Bench(args) => bench::run(&args),
+        Command::Calibrate(args) => calibrate_cmd::run(&args),
     };
     match result {
         Ok(code) => code,

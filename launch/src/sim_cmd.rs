@@ -76,7 +76,11 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<ExitCode> {
         (Some(first), Some(last)) => (last.t_ns - first.t_ns) as f64 * 1e-9,
         _ => 0.0,
     };
-    let dropped = truth.frames.iter().filter(|f| f.arrival_ns.is_none()).count();
+    let dropped = truth
+        .frames
+        .iter()
+        .filter(|f| f.arrival_ns.is_none())
+        .count();
     println!(
         "recorded {span_s:.1} s of robot time: {} encoder samples, {} tracker frames ({} dropped), \
          {} validation poses, {} effect(s) → {} (truth in {}) in {:.2} s",

@@ -63,6 +63,19 @@ pub struct Calibration {
     pub fit: JointFit,
     /// The synchronised session (frames, clock, encoders, phases).
     pub session: SessionData,
+    /// The calibrated model's predictions at the validation holds.
+    pub predictions: Vec<HoldPrediction>,
+}
+
+/// The calibrated model's prediction at one validation hold (in `Bb`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HoldPrediction {
+    /// Mean encoder counts of the hold.
+    pub counts: [f64; 5],
+    /// Predicted tip (mm).
+    pub tip: [f64; 3],
+    /// Predicted needle direction `z_N` (unit).
+    pub direction: [f64; 3],
 }
 
 /// Count rate (counts/s) below which a homing frame counts as at rest.
@@ -92,7 +105,9 @@ pub fn calibrate(
     }
     check_motion(&robot, recording, &phases, options)?;
     let session = synchronise(recording, &robot, phases, options)?;
+    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "synchronised");
     let model_free = latency::estimate(&session)?;
+    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "model-free latency");
     let matched = session.observations(model_free.latency_s);
     let by_phase = |phase: Phase| -> Vec<&Observation> {
         matched.items.iter().filter(|o| o.phase == phase).collect()
@@ -130,9 +145,11 @@ pub fn calibrate(
     let dwell_noise = NoiseModel::from_static(&dwell).unwrap_or_else(NoiseModel::vicra_default);
     let nominal = nominal_model(&robot, &dwell, model_free.latency_s);
     let stepwise_model = stepwise(&nominal, &sets, &dwell_noise)?;
+    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "stepwise method");
     let layout = ParamLayout::paper();
     let fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
 
+    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "joint fit");
     let validation_frames: Vec<Observation> =
         by_phase(Phase::Validation).into_iter().cloned().collect();
     let holds = validation_holds(&validation_frames);
@@ -156,6 +173,17 @@ pub fn calibrate(
         model_residuals("joint", &fit.model, &fit.observations, &final_validation, marker_tip(&fit.model, &final_holds)),
     ];
     let validation = validation_report(&fit, &final_holds);
+    let predictions = final_holds
+        .iter()
+        .filter_map(|hold| {
+            let pose = crate::residuals::predict(&fit.model, &hold.observation).ok()?.pose;
+            Some(HoldPrediction {
+                counts: hold.observation.counts_at_latency(fit.model.latency_s),
+                tip: pose.tip.coords.into(),
+                direction: pose.direction.into_inner().into(),
+            })
+        })
+        .collect();
     let latency_index = fit.layout.ids.iter().position(|id| *id == ParamId::Latency);
     let report = Report {
         recording: recording.dir.display().to_string(),
@@ -197,6 +225,7 @@ pub fn calibrate(
         stepwise: stepwise_model,
         fit,
         session,
+        predictions,
     };
     calibration.report.run_time_s = started.elapsed().as_secs_f64();
     Ok(calibration)

@@ -145,7 +145,9 @@ pub fn joint_fit(
             noise: &noise,
             weights: &weights,
         };
-        model = solve(problem, &model, STAGE)?.model;
+        let solution = solve(problem, &model, STAGE)?;
+        tracing::debug!(outer, evaluations = solution.evaluations, cost = solution.cost, "joint fit pass");
+        model = solution.model;
         let rematched = (model.latency_s - matched_latency).abs() > LATENCY_REMATCH_S;
         if rematched {
             matched_latency = model.latency_s;

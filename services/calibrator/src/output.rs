@@ -31,7 +31,26 @@ pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError>
     std::fs::rename(&temporary, path).map_err(error("rename the temporary file onto"))
 }
 
-/// Writes `params.toml`, `report.json` and `report.html` into `dir` (created if needed).
+/// The validation predictions as CSV: `c1..c5` (mean counts of each hold) then the predicted
+/// tip `x,y,z` (mm) and direction `ux,uy,uz`, in the input/output format of `sabr fk`.
+pub fn predictions_csv(calibration: &Calibration) -> String {
+    let mut text = String::from("c1,c2,c3,c4,c5,x,y,z,ux,uy,uz\n");
+    for p in &calibration.predictions {
+        let fields: Vec<String> = p
+            .counts
+            .iter()
+            .chain(&p.tip)
+            .chain(&p.direction)
+            .map(|v| v.to_string())
+            .collect();
+        text.push_str(&fields.join(","));
+        text.push('\n');
+    }
+    text
+}
+
+/// Writes `params.toml`, `report.json`, `report.html` and `validation_predictions.csv` into
+/// `dir` (created if needed).
 pub fn write_outputs(calibration: &Calibration, dir: &Path) -> Result<(), OutputError> {
     std::fs::create_dir_all(dir).map_err(|source| OutputError {
         path: dir.to_path_buf(),
@@ -45,5 +64,9 @@ pub fn write_outputs(calibration: &Calibration, dir: &Path) -> Result<(), Output
         source: std::io::Error::other(e),
     })?;
     write_atomically(&dir.join("report.json"), json.as_bytes())?;
-    write_atomically(&dir.join("report.html"), html::render(&calibration.report).as_bytes())
+    write_atomically(&dir.join("report.html"), html::render(&calibration.report).as_bytes())?;
+    write_atomically(
+        &dir.join("validation_predictions.csv"),
+        predictions_csv(calibration).as_bytes(),
+    )
 }

@@ -11,6 +11,11 @@
 //!    z held at 0);
 //!
 //! then the needle length from the tip sphere, `l_n = (p_tip − p_r)·z_N` (robust mean).
+//!
+//! The blocks are coupled through the marker IK (the measured joint angles absorb mounting
+//! errors), so plain block iteration does not converge to the least-squares optimum and can
+//! drift; the passes therefore continue only while the whitened marker residual of the
+//! excitation decreases, and the best pass is kept.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
@@ -18,14 +23,13 @@ use crate::layout::CalibModel;
 use crate::marker_ik::joints_from_markers;
 use crate::noise::NoiseModel;
 use crate::observations::Observation;
-use crate::residuals::{joint_angles, predict};
+use crate::residuals::{joint_angles, predict, raw_residual, Quantity};
 use crate::stats::{median, robust_line};
 use crate::{se3, CalibrationError};
 
-const MAX_ITERATIONS: usize = 12;
-/// Convergence: largest relative gear-ratio change and largest pose change (mm or rad).
-const GEAR_RATIO_TOLERANCE: f64 = 1e-7;
-const POSE_TOLERANCE: f64 = 1e-6;
+const MAX_PASSES: usize = 10;
+/// Stop when a pass lowers the marker cost by less than this fraction.
+const COST_TOLERANCE: f64 = 1e-4;
 const STAGE: &str = "stepwise method";
 
 /// The observations the stepwise method uses.
@@ -45,17 +49,26 @@ pub fn stepwise(
     sets: &FitSets<'_>,
     noise: &NoiseModel,
 ) -> Result<CalibModel, CalibrationError> {
+    let mut best = start.clone();
+    let mut best_cost = marker_cost(&best, &sets.excitation, noise);
     let mut model = start.clone();
-    for _ in 0..MAX_ITERATIONS {
-        let before = model.clone();
+    for _ in 0..MAX_PASSES {
         fit_gear_ratios(&mut model, &sets.excitation, noise)?;
         fit_offsets_from_dwell(&mut model, &sets.dwell, noise)?;
         fit_mounts(&mut model, &sets.excitation)?;
         fit_front_base(&mut model, &sets.excitation)?;
-        if converged(&before, &model) {
+        let cost = marker_cost(&model, &sets.excitation, noise);
+        if !(cost < best_cost) {
+            break;
+        }
+        let gain = (best_cost - cost) / best_cost;
+        best = model.clone();
+        best_cost = cost;
+        if gain < COST_TOLERANCE {
             break;
         }
     }
+    let mut model = best;
     fit_needle_length(&mut model, &sets.tip)?;
     Ok(model)
 }
@@ -64,24 +77,23 @@ fn failure(reason: String) -> CalibrationError {
     CalibrationError::Fit { stage: STAGE, reason }
 }
 
-fn converged(a: &CalibModel, b: &CalibModel) -> bool {
-    let (ra, rb) = (&a.robot, &b.robot);
-    let ratios = (0..5).all(|j| {
-        ((ra.joints.gear_ratio[j] - rb.joints.gear_ratio[j]) / ra.joints.gear_ratio[j]).abs()
-            < GEAR_RATIO_TOLERANCE
-    });
-    let offsets = ra.joints.offset.unwrap_or_default();
-    let offsets_b = rb.joints.offset.unwrap_or_default();
-    let pose_change = |x: &Isometry3<f64>, y: &Isometry3<f64>| {
-        (x.translation.vector - y.translation.vector)
-            .amax()
-            .max(x.rotation.angle_to(&y.rotation))
-    };
-    ratios
-        && (0..5).all(|j| (offsets[j] - offsets_b[j]).abs() < POSE_TOLERANCE)
-        && pose_change(&ra.markers.front_mount, &rb.markers.front_mount) < POSE_TOLERANCE
-        && pose_change(&ra.markers.back_mount, &rb.markers.back_mount) < POSE_TOLERANCE
-        && pose_change(&ra.geometry.front_base, &rb.geometry.front_base) < POSE_TOLERANCE
+/// Whitened sum of squares of the marker residuals over `frames` (infinite if the
+/// kinematics fail anywhere).
+fn marker_cost(model: &CalibModel, frames: &[&Observation], noise: &NoiseModel) -> f64 {
+    let mut cost = 0.0;
+    let mut white = [0.0; 6];
+    for obs in frames {
+        let Ok(p) = predict(model, obs) else {
+            return f64::INFINITY;
+        };
+        for quantity in [Quantity::Front, Quantity::Back] {
+            if let Some(raw) = raw_residual(&p, obs, quantity) {
+                noise.of(quantity).whiten(&raw, 6, &mut white);
+                cost += white.iter().map(|v| v * v).sum::<f64>();
+            }
+        }
+    }
+    cost
 }
 
 /// Steps 1–2: IK of the excitation's marker poses, then eq. 15 per joint (the slope).

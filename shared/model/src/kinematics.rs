@@ -1,5 +1,6 @@
 //! Forward and inverse kinematics (robot-model.md §3–§4). All poses in `Bb`, mm and rad.
 
+use std::borrow::Cow;
 use std::f64::consts::TAU;
 
 use nalgebra::{
@@ -193,7 +194,7 @@ pub fn inverse(
     let t = -origin.z / along.z;
     if t.is_nan() || t <= 0.0 {
         return Err(KinematicsError::Unreachable(format!(
-            "the needle line meets the front stage plane {} mm behind p_r, not in front of it",
+            "the needle line meets the front stage plane {:.3} mm behind p_r (it must be ahead)",
             -t
         )));
     }
@@ -210,8 +211,8 @@ pub fn inverse(
         distance: f64::INFINITY,
     }; roll::MAX_ROOTS * 4];
     let mut count = 0;
-    let mut last_failure =
-        "no needle roll puts the back gimbal axis in the needle plane".to_owned();
+    let mut last_failure: Cow<'static, str> =
+        "no needle roll puts the back gimbal axis in the needle plane".into();
     for v in roll::gimbal_plane_directions(&p_r, &z, d).iter() {
         let p_b = p_r + d * v;
         let radius = p_b.y.hypot(p_b.z);
@@ -230,7 +231,7 @@ pub fn inverse(
         let back = match back_stage.inverse(p_b.x, -radius) {
             Ok(back) => back,
             Err(reason) => {
-                last_failure = format!("back 5-bar: {reason}");
+                last_failure = format!("back 5-bar: {reason}").into();
                 continue;
             }
         };
@@ -254,7 +255,7 @@ pub fn inverse(
     if !candidates.is_empty() {
         last_failure = "no candidate solution reproduces the target (singular pose)".into();
     }
-    Err(KinematicsError::Unreachable(last_failure))
+    Err(KinematicsError::Unreachable(last_failure.into_owned()))
 }
 
 /// True when FK of `q` puts the tip within 1e-6 mm of `tip` and the needle along `z`.

@@ -25,8 +25,12 @@ pub const RIG_TRUTH: &str = "sabr/rig/truth";
 /// heartbeats, stopping, done.
 pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
 
+/// Publish-subscribe [`crate::EncoderSample`] used as a plain counter by the launcher's test
+/// node (`sabr-test-node`); no production node uses it.
+pub const TEST_COUNTER: &str = "sabr/test/counter";
+
 /// All publish-subscribe and request-response services above, for listings and checks.
-pub const ALL: [&str; 10] = [
+pub const ALL: [&str; 11] = [
     ENCODER_SAMPLES,
     TRACKER_FRAMES,
     SYNC_MATCHED,
@@ -37,6 +41,7 @@ pub const ALL: [&str; 10] = [
     CALIBRATOR_PARAMETERS,
     RIG_TRUTH,
     GRAPH_LIFECYCLE,
+    TEST_COUNTER,
 ];
 
 #[cfg(test)]

@@ -32,7 +32,7 @@ pub use command::{
     TrackingPriority,
 };
 pub use crc::crc16;
-pub use driver::{DriverConfig, DriverError, DriverStats, NdiDriver, Stamped};
+pub use driver::{CommandWarning, DriverConfig, DriverError, DriverStats, NdiDriver, Stamped};
 pub use error::{EncodeError, ReplyError};
 pub use framing::{decode_reply, FramerStats, RawReply, ReadError, ReplyFramer, ReplyReader};
 pub use pty::{Pty, PtyError, ServeStats};

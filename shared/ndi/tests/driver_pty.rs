@@ -73,7 +73,18 @@ impl<S> Rig<S> {
     }
 }
 
+/// Generous deadlines: the CI machine may be busy.
 fn config(path: &str) -> DriverConfig {
+    DriverConfig {
+        reply_timeout: Duration::from_secs(1),
+        slow_timeout: Duration::from_secs(2),
+        stall_timeout: Duration::from_secs(1),
+        ..DriverConfig::new(path)
+    }
+}
+
+/// Short deadlines, for the tests where running into them is the point.
+fn impatient(path: &str) -> DriverConfig {
     DriverConfig {
         reply_timeout: Duration::from_millis(200),
         slow_timeout: Duration::from_millis(500),
@@ -145,7 +156,7 @@ fn driver_tracks_the_simulated_device_on_a_pty() {
     );
 
     // The device refuses set-up commands while tracking, and the driver says so.
-    match driver.command(&Command::Pinit(1), Duration::from_millis(200)) {
+    match driver.command(&Command::Pinit(1), Duration::from_secs(1)) {
         Err(DriverError::Device { command, error }) => {
             assert_eq!(error, DeviceError::WRONG_MODE);
             assert_eq!(command, "PINIT:01");
@@ -181,7 +192,7 @@ fn a_silent_tracker_is_a_timeout_not_a_hang() {
     let pty = Pty::open().unwrap();
     let path = pty.slave_path().to_str().unwrap().to_owned();
     let started = Instant::now();
-    let result = NdiDriver::connect(config(&path));
+    let result = NdiDriver::connect(impatient(&path));
     let elapsed = started.elapsed();
     assert!(
         matches!(result, Err(DriverError::Timeout { .. })),
@@ -216,17 +227,25 @@ fn a_frozen_frame_counter_is_a_stall() {
             readings: readings(42),
         })
     });
-    let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
+    let stall_timeout = Duration::from_millis(200);
+    let mut driver = NdiDriver::connect(DriverConfig {
+        stall_timeout,
+        ..config(&rig.path)
+    })
+    .unwrap();
     assert_eq!(driver.next_frame().unwrap().reply.frame(), Some(42));
     let started = Instant::now();
     match driver.next_frame() {
         Err(DriverError::Stalled { last_frame, waited }) => {
             assert_eq!(last_frame, Some(42));
-            assert!(waited > Duration::from_millis(200));
+            assert!(waited > stall_timeout);
         }
         other => panic!("expected a stall, got {other:?}"),
     }
-    assert!(started.elapsed() < Duration::from_secs(2));
+    assert!(
+        started.elapsed() < stall_timeout * 10,
+        "noticed, not waited on"
+    );
     assert!(driver.stats().polls > 10);
     drop(driver);
     let (server, _) = rig.shut_down();
@@ -240,4 +259,101 @@ fn bx_options_without_frame_numbers_are_refused() {
         ..config("/nonexistent")
     });
     assert!(matches!(result, Err(DriverError::Config(_))), "{result:?}");
+}
+
+/// Serves like [`Pty::serve`] but flips one byte of every fourth BX reply on the wire.
+fn serve_noisy<S: sabr_ndi::FrameSource + Send + 'static>(
+    source: S,
+    corrupted: Arc<std::sync::atomic::AtomicU64>,
+) -> Rig<S> {
+    use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+    use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+    use std::io::{Read, Write};
+    use std::os::fd::AsFd;
+
+    let pair = nix::pty::openpty(None, None).unwrap();
+    let mut termios = tcgetattr(&pair.slave).unwrap();
+    cfmakeraw(&mut termios);
+    tcsetattr(&pair.slave, SetArg::TCSANOW, &termios).unwrap();
+    let path = nix::unistd::ttyname(&pair.slave)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .to_owned();
+    drop(pair.slave);
+    let mut master = std::fs::File::from(pair.master);
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let mut server = NdiServer::new(4, source);
+        let mut buf = [0u8; 1024];
+        let mut bx_replies = 0u64;
+        let mut stats = ServeStats::default();
+        while !flag.load(Ordering::Relaxed) {
+            let mut fds = [PollFd::new(master.as_fd(), PollFlags::POLLIN)];
+            let ready = poll(&mut fds, PollTimeout::from(20u16)).unwrap_or(0);
+            let readable = fds[0]
+                .revents()
+                .is_some_and(|r| r.contains(PollFlags::POLLIN));
+            if ready == 0 || !readable {
+                std::thread::sleep(Duration::from_millis(5));
+                continue;
+            }
+            let Ok(n) = master.read(&mut buf) else {
+                continue;
+            };
+            let mut reply = server.feed(&buf[..n]);
+            if reply.starts_with(&[0xC4, 0xA5]) {
+                bx_replies += 1;
+                if bx_replies.is_multiple_of(4) {
+                    let last = reply.len() - 3;
+                    reply[last] ^= 0x40; // inside the body: the body CRC catches it
+                    corrupted.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            if master.write_all(&reply).is_ok() {
+                stats.bytes_out += reply.len() as u64;
+            }
+        }
+        (server, stats)
+    });
+    Rig { path, stop, thread }
+}
+
+#[test]
+fn corrupted_replies_on_the_wire_are_counted_and_tracking_goes_on() {
+    let corrupted = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let rig = serve_noisy(camera(), corrupted.clone());
+    let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
+    let (mut frames, mut rejected) = (0u64, 0u64);
+    while frames < 20 {
+        match driver.next_frame() {
+            Ok(stamped) => {
+                let frame = stamped.reply.frame().unwrap();
+                let front = stamped.reply.handle(2).unwrap().transform.unwrap();
+                assert_eq!(front.t[0], 0.5 * frame as f32, "frame {frame}: data intact");
+                frames += 1;
+            }
+            Err(DriverError::Reply { command, error }) => {
+                assert_eq!(command, "BX:0001");
+                assert!(
+                    matches!(error, sabr_ndi::ReplyError::BadCrc { .. }),
+                    "{error}"
+                );
+                rejected += 1;
+            }
+            Err(other) => panic!("{other}"),
+        }
+    }
+    let stats = driver.stats();
+    drop(driver);
+    rig.shut_down();
+    let corrupted = corrupted.load(Ordering::Relaxed);
+    assert_eq!(rejected, corrupted, "every corrupted reply was rejected");
+    assert_eq!(stats.framing.bad_replies, rejected, "and counted");
+    assert!(
+        rejected >= stats.polls / 4 - 1 && rejected > 0,
+        "{rejected} of {} polls",
+        stats.polls
+    );
 }

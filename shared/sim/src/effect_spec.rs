@@ -80,6 +80,12 @@ impl<'a> Params<'a> {
                 ));
             };
             let (key, value) = (key.trim(), value.trim());
+            if value.contains('=') {
+                return Err(error(
+                    spec,
+                    format!("`{item}` holds more than one `=`: separate pairs with commas"),
+                ));
+            }
             if pairs.iter().any(|(k, _, _)| *k == key) {
                 return Err(error(spec, format!("key `{key}` is given twice")));
             }
@@ -332,7 +338,8 @@ mod tests {
                 "unknown key `colour`",
             ),
             ("backlash:joint=2,joint=3,width=0.01", "given twice"),
-            ("backlash:joint=2;width=0.01", "not of the form key=value"),
+            ("backlash:joint=2;width=0.01", "separate pairs with commas"),
+            ("backlash:joint=2,width", "not of the form key=value"),
             ("link:link=l_x,delta=1", "must be one of l_f"),
             ("link:link=l_f,delta=50", "beyond the plausible limit"),
             (

@@ -102,7 +102,7 @@ enum Motion {
     /// Multi-sine about `centre`, faded in and out over `ramp_s`.
     MultiSine {
         centre: Joints,
-        sines: [[Sine; 3]; 5],
+        sines: Box<[[Sine; 3]; 5]>,
         ramp_s: f64,
     },
 }
@@ -217,7 +217,7 @@ impl Builder {
             duration_s,
             Motion::MultiSine {
                 centre: self.at,
-                sines,
+                sines: Box::new(sines),
                 ramp_s,
             },
         )

@@ -192,11 +192,11 @@ impl Session {
         let extra_latency_ms = config
             .effects
             .iter()
-            .map(|e| match e {
-                SimEffect::TrackerLatency { extra_ms } => *extra_ms,
-                _ => 0.0,
+            .find_map(|e| match e {
+                SimEffect::TrackerLatency { extra_ms } => Some(*extra_ms),
+                _ => None,
             })
-            .sum();
+            .unwrap_or(0.0);
         let tracker = TrackerTruth::sample(
             &config.tracker,
             &centre_in_base,

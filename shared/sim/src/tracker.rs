@@ -69,7 +69,7 @@ impl Default for TrackerConfig {
             occlusions_per_min: 0.5,
             occlusion_s: (0.2, 1.0),
             clock_drift_ppm: 50.0,
-            distance_mm: (900.0, 1100.0),
+            distance_mm: (800.0, 1000.0),
         }
     }
 }
@@ -96,7 +96,7 @@ pub struct TrackerTruth {
 }
 
 impl TrackerTruth {
-    /// Samples a session: tracker ~1 m from `workspace_centre` (a point in `M`, mm) looking at
+    /// Samples a session: tracker `distance_mm` from `workspace_centre` (a point in `M`, mm), looking at
     /// it from 20–50° elevation, latency, clock error, frame counter start, fit errors.
     pub fn sample(
         config: &TrackerConfig,

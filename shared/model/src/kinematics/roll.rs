@@ -18,7 +18,7 @@ use nalgebra::Vector3;
 pub(super) const MAX_ROOTS: usize = 4;
 /// Number of φ samples used to bracket the roots.
 const SAMPLES: usize = 32;
-/// Newton iterations allowed per root (it converges in 3–6).
+/// Newton iterations allowed per root (it converges in 3–6; bisection needs ≤ 50).
 const MAX_ITERATIONS: usize = 60;
 
 /// `A c + B s + C c² + D c s + E s²`.
@@ -59,16 +59,19 @@ impl PlaneCondition {
             } else {
                 high = phi;
             }
-            let slope = self.slope(cos, sin);
-            let newton = phi - value / slope;
-            let next = if newton > low && newton < high {
-                newton
+            let step = value / self.slope(cos, sin);
+            let newton = phi - step;
+            if newton >= low && newton <= high {
+                // Quadratic convergence: after a step this small the error is far below
+                // rounding.
+                if step.abs() <= 1e-13 {
+                    return newton;
+                }
+                phi = newton;
             } else {
-                0.5 * (low + high)
-            };
-            let converged = (next - phi).abs() <= 1e-15 * (1.0 + phi.abs());
-            phi = next;
-            if converged || high - low <= 1e-15 {
+                phi = 0.5 * (low + high);
+            }
+            if high - low <= 1e-15 {
                 break;
             }
         }

@@ -12,19 +12,20 @@ pub(super) struct FiveBar {
     l_e: f64,
     /// Length of the combined distal vector `l + l_e·e^{−iπ/4}` (mm).
     distal: f64,
-    /// Angle of that vector relative to θd (rad).
-    distal_angle: f64,
+    /// Cosine and sine of that vector's angle relative to θd.
+    distal_direction: (f64, f64),
 }
 
 impl FiveBar {
     fn new(l: f64, l_e: f64) -> Self {
         let along = l + l_e * FRAC_1_SQRT_2;
         let across = -l_e * FRAC_1_SQRT_2;
+        let distal = (along * along + across * across).sqrt();
         Self {
             l,
             l_e,
-            distal: along.hypot(across),
-            distal_angle: across.atan2(along),
+            distal,
+            distal_direction: (along / distal, across / distal),
         }
     }
 
@@ -65,10 +66,13 @@ impl FiveBar {
             (reach * reach + self.l * self.l - self.distal * self.distal) / (2.0 * self.l * reach);
         let spread = cos_spread.clamp(-1.0, 1.0).acos();
         let bearing = y.atan2(x);
+        let (cos_beta, sin_beta) = self.distal_direction;
         let solve = |proximal: f64| {
             let (s, c) = proximal.sin_cos();
-            let distal_bearing = (y - self.l * s).atan2(x - self.l * c);
-            (proximal, distal_bearing - self.distal_angle)
+            let (dx, dy) = (x - self.l * c, y - self.l * s);
+            // θd: the distal vector's bearing minus its angle β relative to θd.
+            let distal = (dy * cos_beta - dx * sin_beta).atan2(dx * cos_beta + dy * sin_beta);
+            (proximal, distal)
         };
         Ok([solve(bearing - spread), solve(bearing + spread)])
     }

@@ -1,0 +1,150 @@
+//! Compute costs: forward and inverse kinematics per solve, recording a simulated session
+//! (`sabr sim record`) and calibrating it (what `sabr calibrate` does: read, calibrate, write).
+
+use super::stats::{duration_ns, Measurement};
+use anyhow::{bail, Context};
+use sabr_calibrator::{calibrate, write_outputs, CalibrationOptions};
+use sabr_model::{forward, inverse, Geometry, Joints, RobotParams, HOME_JOINTS};
+use sabr_recording::Recording;
+use sabr_sim::{record_session, write_session, SimConfig};
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Instant;
+
+/// Solves per timed batch: the batch time / this is one recorded value, so the clock read
+/// (~25 ns) does not distort a sub-microsecond solve.
+pub const SOLVES_PER_BATCH: u64 = 100;
+
+/// Joint vectors tried around [`HOME_JOINTS`] (those FK and IK both solve are used).
+const POSE_CANDIDATES: usize = 64;
+
+/// Largest offset from home of a candidate joint angle (rad).
+const POSE_SPREAD_RAD: f64 = 0.08;
+
+/// Seed of the simulated session (as `sabr sim record --seed 1`).
+pub const SESSION_SEED: u64 = 1;
+
+/// An IK target: the tip (mm, `Bb`) and needle direction of a joint vector, and the joints.
+struct Target {
+    joints: Joints,
+    tip: nalgebra::Point3<f64>,
+    direction: nalgebra::Vector3<f64>,
+}
+
+/// Deterministic joint vectors around home, each reachable by FK and solvable back by IK.
+fn targets(geometry: &Geometry) -> anyhow::Result<Vec<Target>> {
+    let mut found = Vec::new();
+    for index in 0..POSE_CANDIDATES {
+        let mut joints = HOME_JOINTS;
+        for (axis, angle) in joints.iter_mut().enumerate() {
+            let phase = index as f64 * 1.618 + axis as f64 * 2.399;
+            *angle += POSE_SPREAD_RAD * phase.sin();
+        }
+        let Ok(pose) = forward(geometry, &joints) else {
+            continue;
+        };
+        let direction = pose.direction.into_inner();
+        if inverse(geometry, &pose.tip, &direction, &HOME_JOINTS).is_ok() {
+            found.push(Target {
+                joints,
+                tip: pose.tip,
+                direction,
+            });
+        }
+    }
+    if found.len() < POSE_CANDIDATES / 2 {
+        bail!(
+            "only {} of {POSE_CANDIDATES} poses near home are solvable by FK and IK",
+            found.len()
+        );
+    }
+    Ok(found)
+}
+
+/// Per-solve time of FK (`compute/fk`) and IK (`compute/ik`) with the nominal model, in
+/// batches of [`SOLVES_PER_BATCH`] (`batches` recorded values each, ns/solve).
+pub fn kinematics(batches: u64) -> anyhow::Result<[Measurement; 2]> {
+    let geometry = RobotParams::nominal().effective_geometry();
+    let targets = targets(&geometry)?;
+    let mut fk = Measurement::new("compute/fk", "ns/solve");
+    let mut ik = Measurement::new("compute/ik", "ns/solve");
+    let mut next = targets.iter().cycle();
+    for _ in 0..batches {
+        let started = Instant::now();
+        for target in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+            black_box(forward(black_box(&geometry), black_box(&target.joints)))?;
+        }
+        fk.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
+
+        let started = Instant::now();
+        for target in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+            black_box(inverse(
+                black_box(&geometry),
+                black_box(&target.tip),
+                black_box(&target.direction),
+                black_box(&HOME_JOINTS),
+            ))?;
+        }
+        ik.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
+    }
+    Ok([fk, ik])
+}
+
+/// Solves per second from a `ns/solve` measurement (its mean).
+pub fn solves_per_second(per_solve: &Measurement) -> f64 {
+    1e9 / per_solve.histogram.mean()
+}
+
+/// Times recording the default simulated session (seed [`SESSION_SEED`], phase durations ×
+/// `duration_scale`) and writing it to `dir`, as `sabr sim record` does.
+pub fn sim_record(dir: &Path, duration_scale: f64) -> anyhow::Result<Measurement> {
+    let mut config = SimConfig::new(SESSION_SEED);
+    config.duration_scale = duration_scale;
+    let started = Instant::now();
+    let (recording, truth) = record_session(&config).context("sim record failed")?;
+    write_session(dir, &recording, &truth).context("sim record: writing failed")?;
+    let mut measurement = Measurement::new(format!("compute/sim-record-x{duration_scale}"), "ns");
+    measurement.record_duration(started.elapsed())?;
+    Ok(measurement)
+}
+
+/// Times calibrating the recording in `recording_dir` (read, calibrate, write the outputs to
+/// `out_dir`), as `sabr calibrate` does.
+pub fn calibration(recording_dir: &Path, out_dir: &Path, name: &str) -> anyhow::Result<Measurement> {
+    let started = Instant::now();
+    let recording = Recording::read(recording_dir)?;
+    let result = calibrate(&recording, &CalibrationOptions::default())
+        .context("calibration failed")?;
+    write_outputs(&result, out_dir)?;
+    let mut measurement = Measurement::new(name, "ns");
+    measurement.record_duration(started.elapsed())?;
+    Ok(measurement)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn targets_reproduce_their_joints_through_ik() {
+        let geometry = RobotParams::nominal().effective_geometry();
+        let targets = targets(&geometry).unwrap();
+        assert!(targets.len() >= POSE_CANDIDATES / 2);
+        for target in &targets {
+            let q = inverse(&geometry, &target.tip, &target.direction, &HOME_JOINTS).unwrap();
+            let tip = forward(&geometry, &q).unwrap().tip;
+            assert!((tip - target.tip).norm() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn kinematics_records_one_value_per_batch() {
+        let [fk, ik] = kinematics(3).unwrap();
+        assert_eq!(fk.summary().count, 3);
+        assert_eq!(ik.summary().count, 3);
+        assert!(fk.summary().p50 > 0 && ik.summary().p50 > 0);
+        let rate = solves_per_second(&ik);
+        let mean_ns = ik.histogram.mean();
+        assert!((rate * mean_ns - 1e9).abs() < 1.0, "{rate} solves/s vs {mean_ns} ns");
+    }
+}

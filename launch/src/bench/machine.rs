@@ -1,0 +1,34 @@
+//! A one-line description of the machine a bench ran on (cores, CPU model, memory).
+
+/// `N cores, <model name>, <GiB> GiB RAM` from `/proc/cpuinfo` and `/proc/meminfo`; parts that
+/// cannot be read are shown as `unknown`.
+pub fn describe() -> String {
+    let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let meminfo = std::fs::read_to_string("/proc/meminfo").unwrap_or_default();
+    let model = proc_value(&cpuinfo, "model name").unwrap_or("unknown CPU");
+    let memory = proc_value(&meminfo, "MemTotal")
+        .and_then(|v| v.trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or("unknown".to_owned(), |kib| format!("{:.1}", kib / 1024.0 / 1024.0));
+    format!("{cores} cores, {model}, {memory} GiB RAM")
+}
+
+/// The value of the first `key: value` line with `key` in a `/proc` text.
+fn proc_value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
+    text.lines().find_map(|line| {
+        let (name, value) = line.split_once(':')?;
+        (name.trim() == key).then(|| value.trim())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_the_first_matching_key() {
+        let text = "processor\t: 0\nmodel name\t: AMD EPYC\nmodel name\t: other\n";
+        assert_eq!(proc_value(text, "model name"), Some("AMD EPYC"));
+        assert_eq!(proc_value(text, "flags"), None);
+    }
+}

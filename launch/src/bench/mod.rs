@@ -1,0 +1,284 @@
+//! `sabr bench`: the latency of the transports the graph is built on (iceoryx2 with busy
+//! polling and with blocking wake-up, Unix-domain sockets; separate processes, the graph's own
+//! message sizes), compute costs (FK, IK, `sim record`, calibration), and the live-graph hops
+//! as ratios to those baselines. Prints p50/p90/p99/p99.9/max and writes one `.hgrm` per
+//! measurement, `bench.csv` and `idle-cpu.csv` to the output directory.
+
+mod compute;
+mod cpu;
+mod hops;
+mod iox;
+mod machine;
+mod output;
+mod payload;
+mod pingpong;
+mod pong;
+mod stats;
+mod uds;
+
+use anyhow::{bail, Context};
+use cpu::CpuShare;
+use payload::{Payload, Transport};
+use sabr_node::Domain;
+use stats::{format_ns, Measurement};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Arguments of `sabr bench`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Output directory (must be absent or empty) [default: runs/bench-<unix time>].
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Round trips per ping-pong baseline, and kinematics solves / 100 [default: 20000,
+    /// with --quick 1000].
+    #[arg(long, value_name = "N")]
+    samples: Option<u64>,
+    /// A quick check, not figures to quote: fewer samples, short idle windows, a simulated
+    /// session of 1/10 the default length.
+    #[arg(long)]
+    quick: bool,
+    /// Parts to run (comma-separated) [default: all].
+    #[arg(long, value_enum, value_delimiter = ',', value_name = "PART")]
+    only: Vec<Part>,
+    #[command(flatten)]
+    pong: pong::PongArgs,
+}
+
+/// A part of the bench.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum Part {
+    /// Ping-pong baselines between two processes.
+    Baselines,
+    /// FK and IK per solve, `sim record` and calibration time.
+    Compute,
+    /// Hops of the live graph, as ratios to the baselines.
+    Hops,
+}
+
+/// How much a run measures.
+struct Settings {
+    parts: Vec<Part>,
+    ping_pong: pingpong::Plan,
+    kinematics_batches: u64,
+    session_scale: f64,
+}
+
+impl Settings {
+    fn new(args: &BenchArgs) -> anyhow::Result<Self> {
+        let samples = args
+            .samples
+            .unwrap_or(if args.quick { 1_000 } else { 20_000 });
+        if samples == 0 {
+            bail!("--samples must be at least 1");
+        }
+        let parts = if args.only.is_empty() {
+            vec![Part::Baselines, Part::Compute, Part::Hops]
+        } else {
+            args.only.clone()
+        };
+        Ok(Self {
+            parts,
+            ping_pong: pingpong::Plan {
+                warmup: (samples / 10).max(10),
+                samples,
+                idle_window: Duration::from_millis(if args.quick { 300 } else { 2_000 }),
+            },
+            kinematics_batches: (samples / compute::SOLVES_PER_BATCH).max(10),
+            session_scale: if args.quick { 0.1 } else { 1.0 },
+        })
+    }
+
+    fn runs(&self, part: Part) -> bool {
+        self.parts.contains(&part)
+    }
+}
+
+/// Everything a run measured or could not measure.
+#[derive(Default)]
+struct Results {
+    measurements: Vec<Measurement>,
+    idle: Vec<(String, CpuShare)>,
+    unavailable: Vec<String>,
+    notes: Vec<String>,
+}
+
+impl Results {
+    /// Keeps `measured`, or prints and keeps `<name>: not available: <reason>`.
+    fn add(&mut self, name: &str, measured: anyhow::Result<Vec<Measurement>>) {
+        match measured {
+            Ok(measurements) => self.measurements.extend(measurements),
+            Err(error) => {
+                let line = format!("{name}: not available: {error:#}");
+                eprintln!("{line}");
+                self.unavailable.push(line);
+            }
+        }
+    }
+}
+
+/// Runs `sabr bench` (or, with the hidden `--role pong`, one pong process).
+pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
+    if args.pong.role.is_some() {
+        pong::run(&args.pong)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let settings = Settings::new(args)?;
+    let out = create_out_dir(args.out.clone())?;
+    let machine = machine::describe();
+    println!("sabr bench on {machine}; output in {}", out.display());
+    let mut results = Results::default();
+    if settings.runs(Part::Baselines) {
+        run_baselines(&settings, &mut results)?;
+    }
+    if settings.runs(Part::Compute) {
+        run_compute(&settings, &out, &mut results);
+    }
+    let hop_rows = hops::ratio_rows(
+        &[],
+        &results.measurements,
+        "the live graph is not measured yet (issue 8 follow-up)",
+    );
+
+    output::write_hgrm_files(&out, &results.measurements)?;
+    output::write_csv(&out.join(output::CSV_FILE), &results.measurements)?;
+    output::write_idle_csv(&out.join(output::IDLE_CSV_FILE), &results.idle)?;
+
+    println!();
+    print!("{}", output::percentile_table(&results.measurements));
+    if settings.runs(Part::Baselines) {
+        println!("\npayloads (request → response):");
+        for payload in Payload::ALL {
+            println!("  {}", payload.describe());
+        }
+        println!("\nCPU use of the waiting pong process (1.0 = one core):");
+        for (name, share) in &results.idle {
+            println!(
+                "  {name:<32} {:.3} (±{:.3} over {:.1} s)",
+                share.cores,
+                share.resolution,
+                share.window.as_secs_f64()
+            );
+        }
+    }
+    for note in &results.notes {
+        println!("{note}");
+    }
+    if settings.runs(Part::Hops) {
+        println!("\nlive-graph hops (p99 as a ratio to the same payload's round-trip p99):");
+        print!("{}", hops::ratio_table(&hop_rows));
+    }
+    for line in &results.unavailable {
+        println!("{line}");
+    }
+    println!(
+        "\nwrote {} .hgrm files (values in µs), {} and {} to {}",
+        results.measurements.len(),
+        output::CSV_FILE,
+        output::IDLE_CSV_FILE,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Creates the output directory; an existing one must be empty (nothing is overwritten).
+fn create_out_dir(out: Option<PathBuf>) -> anyhow::Result<PathBuf> {
+    let dir = match out {
+        Some(dir) => dir,
+        None => {
+            let seconds = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs());
+            PathBuf::from("runs").join(format!("bench-{seconds}"))
+        }
+    };
+    if dir.exists() {
+        let mut entries = std::fs::read_dir(&dir)
+            .with_context(|| format!("cannot read the output directory {}", dir.display()))?;
+        if entries.next().is_some() {
+            bail!("{} is not empty: choose a new output directory", dir.display());
+        }
+    }
+    std::fs::create_dir_all(&dir)
+        .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
+    Ok(dir)
+}
+
+/// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards.
+fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<()> {
+    let domain = Domain::new(&format!("sabr-bench-{}", std::process::id()))?;
+    let socket_dir = std::env::temp_dir();
+    for transport in Transport::ALL {
+        for payload in Payload::ALL {
+            let name = payload::baseline_name(transport, payload);
+            eprintln!("measuring {name} ...");
+            let measured =
+                pingpong::run(transport, payload, &settings.ping_pong, &domain, &socket_dir);
+            let measured = measured.map(|ping_pong| {
+                results.idle.push((name.clone(), ping_pong.pong_idle));
+                vec![ping_pong.round_trips]
+            });
+            results.add(&name, measured);
+        }
+    }
+    let left = sabr_node::release_domain(&domain);
+    if !left.is_empty() {
+        results.notes.push(format!(
+            "warning: iceoryx2 files of domain {domain} left behind: {left:?}"
+        ));
+    }
+    Ok(())
+}
+
+/// Kinematics per solve, then `sim record` and calibration of that recording in `out/work`
+/// (removed afterwards).
+fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
+    eprintln!("measuring compute/fk and compute/ik ...");
+    let kinematics = compute::kinematics(settings.kinematics_batches);
+    if let Ok([fk, ik]) = &kinematics {
+        let ik_p99 = ik.summary().p99;
+        results.notes.push(format!(
+            "\nFK: {:.0} solves/s, IK: {:.0} solves/s (mean of {} batches of {}); \
+             IK solve p99 {} (goal ≤ {}: {})",
+            compute::solves_per_second(fk),
+            compute::solves_per_second(ik),
+            settings.kinematics_batches,
+            compute::SOLVES_PER_BATCH,
+            format_ns(ik_p99),
+            format_ns(hops::IK_SOLVE_LIMIT_NS),
+            if ik_p99 <= hops::IK_SOLVE_LIMIT_NS { "met" } else { "MISSED" }
+        ));
+    }
+    results.add("compute/fk, compute/ik", kinematics.map(Vec::from));
+
+    let work = out.join("work");
+    let session = work.join("session");
+    eprintln!("measuring compute/sim-record ...");
+    let recorded = compute::sim_record(&session, settings.session_scale);
+    let recorded_ok = recorded.is_ok();
+    results.add(
+        &format!("compute/sim-record-x{}", settings.session_scale),
+        recorded.map(|m| vec![m]),
+    );
+    let calibrate_name = format!("compute/calibrate-x{}", settings.session_scale);
+    if recorded_ok {
+        eprintln!("measuring {calibrate_name} ...");
+        let calibrated =
+            compute::calibration(&session, &work.join("calibration"), &calibrate_name);
+        results.add(&calibrate_name, calibrated.map(|m| vec![m]));
+    } else {
+        results.add(
+            &calibrate_name,
+            Err(anyhow::anyhow!("no recording (sim record failed)")),
+        );
+    }
+    if let Err(error) = std::fs::remove_dir_all(&work) {
+        if work.exists() {
+            results.notes.push(format!(
+                "warning: cannot remove {}: {error}",
+                work.display()
+            ));
+        }
+    }
+}

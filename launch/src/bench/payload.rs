@@ -1,0 +1,139 @@
+//! What the ping-pong baselines carry (the graph's own messages) and over what.
+
+use sabr_node::msgs::{EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame};
+
+/// The request → response message pair of a ping-pong, one per live-graph hop, so each hop is
+/// compared with a baseline carrying the same bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Payload {
+    /// [`EncoderSample`] → [`EncoderSample`] (the encoder sample → sync hop).
+    EncoderSample,
+    /// [`TrackerFrame`] → [`MatchedSample`] (the tracker frame → matched sample hop).
+    TrackerFrame,
+    /// [`IkRequest`] → [`IkResponse`] (the IK round trip).
+    Ik,
+    /// [`MotorSetpoint`] → [`MotorSetpoint`] (the motor setpoint → rig hop).
+    MotorSetpoint,
+}
+
+impl Payload {
+    /// Every payload, in the order measured and printed.
+    pub const ALL: [Payload; 4] = [
+        Payload::EncoderSample,
+        Payload::TrackerFrame,
+        Payload::Ik,
+        Payload::MotorSetpoint,
+    ];
+
+    /// Name used in measurement names and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Payload::EncoderSample => "encoder-sample",
+            Payload::TrackerFrame => "tracker-frame",
+            Payload::Ik => "ik",
+            Payload::MotorSetpoint => "motor-setpoint",
+        }
+    }
+
+    /// Size of the request message in bytes.
+    pub fn request_bytes(self) -> usize {
+        match self {
+            Payload::EncoderSample => size_of::<EncoderSample>(),
+            Payload::TrackerFrame => size_of::<TrackerFrame>(),
+            Payload::Ik => size_of::<IkRequest>(),
+            Payload::MotorSetpoint => size_of::<MotorSetpoint>(),
+        }
+    }
+
+    /// Size of the response message in bytes.
+    pub fn response_bytes(self) -> usize {
+        match self {
+            Payload::EncoderSample => size_of::<EncoderSample>(),
+            Payload::TrackerFrame => size_of::<MatchedSample>(),
+            Payload::Ik => size_of::<IkResponse>(),
+            Payload::MotorSetpoint => size_of::<MotorSetpoint>(),
+        }
+    }
+
+    /// `request → response` types and sizes, for the printed legend.
+    pub fn describe(self) -> String {
+        let (request, response) = match self {
+            Payload::EncoderSample => ("EncoderSample", "EncoderSample"),
+            Payload::TrackerFrame => ("TrackerFrame", "MatchedSample"),
+            Payload::Ik => ("IkRequest", "IkResponse"),
+            Payload::MotorSetpoint => ("MotorSetpoint", "MotorSetpoint"),
+        };
+        format!(
+            "{}: {request} ({} B) → {response} ({} B)",
+            self.name(),
+            self.request_bytes(),
+            self.response_bytes()
+        )
+    }
+}
+
+/// How the two processes of a ping-pong exchange messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Transport {
+    /// iceoryx2 publish-subscribe, both sides spinning on `receive()`.
+    #[value(name = "iox2-poll")]
+    IoxPoll,
+    /// iceoryx2 publish-subscribe plus an event per sample; both sides sleep in the listener
+    /// (the graph's wake-on-data pattern).
+    #[value(name = "iox2-event")]
+    IoxEvent,
+    /// A blocking Unix-domain stream socket carrying the same bytes.
+    #[value(name = "uds")]
+    Uds,
+}
+
+impl Transport {
+    /// Every transport, in the order measured and printed.
+    pub const ALL: [Transport; 3] = [Transport::IoxPoll, Transport::IoxEvent, Transport::Uds];
+
+    /// Name used in measurement names and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Transport::IoxPoll => "iox2-poll",
+            Transport::IoxEvent => "iox2-event",
+            Transport::Uds => "uds",
+        }
+    }
+}
+
+/// Name of the round-trip measurement of `payload` over `transport`.
+pub fn baseline_name(transport: Transport, payload: Payload) -> String {
+    format!("{}/{}", transport.name(), payload.name())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::ValueEnum;
+
+    #[test]
+    fn command_line_names_match_measurement_names() {
+        for payload in Payload::ALL {
+            let value = payload.to_possible_value().unwrap();
+            assert_eq!(value.get_name(), payload.name());
+        }
+        for transport in Transport::ALL {
+            let value = transport.to_possible_value().unwrap();
+            assert_eq!(value.get_name(), transport.name());
+        }
+    }
+
+    #[test]
+    fn sizes_are_the_message_sizes() {
+        assert_eq!(Payload::EncoderSample.request_bytes(), 56);
+        assert!(Payload::TrackerFrame.response_bytes() > Payload::TrackerFrame.request_bytes());
+        assert_eq!(
+            Payload::Ik.describe(),
+            format!(
+                "ik: IkRequest ({} B) → IkResponse ({} B)",
+                size_of::<IkRequest>(),
+                size_of::<IkResponse>()
+            )
+        );
+    }
+}

@@ -1,0 +1,234 @@
+//! The measuring side of a ping-pong baseline: spawns `sabr bench --role pong ...` as a
+//! separate process, times round trips, then watches the waiting pong's CPU use.
+
+use super::cpu::{measure_cpu_share, CpuShare};
+use super::iox::{IoxEnd, Wait};
+use super::payload::{baseline_name, Payload, Transport};
+use super::stats::Measurement;
+use super::uds::{SocketFile, UdsEnd};
+use anyhow::{bail, Context};
+use sabr_node::msgs::{
+    EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
+};
+use sabr_node::{Domain, Message};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Longest wait for one message before a side gives up (the peer hung or died).
+pub const PEER_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Longest wait for the pong process to start up (and to exit at the end).
+const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// How many round trips one ping-pong runs, and how long the idle pong is watched.
+#[derive(Debug, Clone, Copy)]
+pub struct Plan {
+    /// Round trips run first and not recorded (caches, page faults, connection set-up).
+    pub warmup: u64,
+    /// Round trips recorded.
+    pub samples: u64,
+    /// Window over which the pong's CPU use is measured while it waits for a message.
+    pub idle_window: Duration,
+}
+
+impl Plan {
+    /// Messages the pong answers: warm-up, samples and the final one that releases it.
+    pub fn pong_count(&self) -> u64 {
+        self.warmup + self.samples + 1
+    }
+}
+
+/// What one ping-pong measured.
+pub struct PingPong {
+    /// Round-trip times (ns), named `<transport>/<payload>`.
+    pub round_trips: Measurement,
+    /// CPU use of the pong process while it waited for a message that did not come.
+    pub pong_idle: CpuShare,
+}
+
+/// The two iceoryx2 service names of a ping-pong: (ping, pong).
+pub fn service_names(transport: Transport, payload: Payload) -> (String, String) {
+    let base = format!("sabr-bench/{}", baseline_name(transport, payload));
+    (format!("{base}/ping"), format!("{base}/pong"))
+}
+
+/// Runs one ping-pong of `payload` over `transport` against a freshly spawned pong process.
+/// iceoryx2 services live in `domain`; the Unix socket is created in `socket_dir`.
+pub fn run(
+    transport: Transport,
+    payload: Payload,
+    plan: &Plan,
+    domain: &Domain,
+    socket_dir: &Path,
+) -> anyhow::Result<PingPong> {
+    match transport {
+        Transport::IoxPoll | Transport::IoxEvent => match payload {
+            Payload::EncoderSample => {
+                run_iox::<EncoderSample, EncoderSample>(transport, payload, plan, domain)
+            }
+            Payload::TrackerFrame => {
+                run_iox::<TrackerFrame, MatchedSample>(transport, payload, plan, domain)
+            }
+            Payload::Ik => run_iox::<IkRequest, IkResponse>(transport, payload, plan, domain),
+            Payload::MotorSetpoint => {
+                run_iox::<MotorSetpoint, MotorSetpoint>(transport, payload, plan, domain)
+            }
+        },
+        Transport::Uds => run_uds(payload, plan, socket_dir),
+    }
+}
+
+/// The iceoryx2 wait mode of a transport.
+pub fn wait_mode(transport: Transport) -> anyhow::Result<Wait> {
+    match transport {
+        Transport::IoxPoll => Ok(Wait::BusyPoll),
+        Transport::IoxEvent => Ok(Wait::Event),
+        Transport::Uds => bail!("the uds transport does not use iceoryx2"),
+    }
+}
+
+fn run_iox<Req: Message + Default, Resp: Message>(
+    transport: Transport,
+    payload: Payload,
+    plan: &Plan,
+    domain: &Domain,
+) -> anyhow::Result<PingPong> {
+    let (ping, pong) = service_names(transport, payload);
+    let end = IoxEnd::<Req, Resp>::open(domain, &ping, &pong, wait_mode(transport)?)?;
+    let mut peer = PongProcess::spawn(
+        transport,
+        payload,
+        plan,
+        &["--domain", domain.as_str()],
+    )?;
+    let started = Instant::now();
+    while !end.peer_ready() {
+        peer.check_running()?;
+        if started.elapsed() > STARTUP_TIMEOUT {
+            bail!("the pong process did not open its iceoryx2 ports in {STARTUP_TIMEOUT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    measure(transport, payload, plan, peer, |deadline| {
+        end.send(Req::default())?;
+        end.receive(deadline).map(drop)
+    })
+}
+
+fn run_uds(payload: Payload, plan: &Plan, socket_dir: &Path) -> anyhow::Result<PingPong> {
+    let path = socket_dir.join(format!(
+        "sabr-bench-{}-{}.sock",
+        std::process::id(),
+        payload.name()
+    ));
+    let socket = SocketFile::bind(&path)?;
+    let socket_arg = socket.path().to_string_lossy().into_owned();
+    let mut peer = PongProcess::spawn(Transport::Uds, payload, plan, &["--socket", &socket_arg])?;
+    let stream = socket.accept(STARTUP_TIMEOUT, || peer.check_running())?;
+    let mut end = UdsEnd::new(
+        stream,
+        payload.request_bytes(),
+        payload.response_bytes(),
+        PEER_TIMEOUT,
+    )?;
+    measure(Transport::Uds, payload, plan, peer, |_| {
+        end.send()?;
+        end.receive()
+    })
+}
+
+/// Runs the plan's round trips with `round_trip` (given its deadline), records the timed
+/// ones, measures the pong's idle CPU use, then releases the pong and checks it exited well.
+fn measure(
+    transport: Transport,
+    payload: Payload,
+    plan: &Plan,
+    mut peer: PongProcess,
+    mut round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
+) -> anyhow::Result<PingPong> {
+    let name = baseline_name(transport, payload);
+    for _ in 0..plan.warmup {
+        round_trip(Instant::now() + PEER_TIMEOUT).with_context(|| format!("{name}: warm-up"))?;
+    }
+    let mut round_trips = Measurement::new(name.clone(), "ns");
+    for index in 0..plan.samples {
+        let start = Instant::now();
+        round_trip(start + PEER_TIMEOUT)
+            .with_context(|| format!("{name}: round trip {index}"))?;
+        round_trips.record_duration(start.elapsed())?;
+    }
+    let pong_idle = measure_cpu_share(peer.pid(), plan.idle_window)
+        .with_context(|| format!("{name}: idle CPU of the pong process"))?;
+    round_trip(Instant::now() + PEER_TIMEOUT).with_context(|| format!("{name}: last round trip"))?;
+    peer.finish()?;
+    Ok(PingPong {
+        round_trips,
+        pong_idle,
+    })
+}
+
+/// A spawned pong process; killed if still running when dropped (on an error path).
+struct PongProcess {
+    child: Child,
+}
+
+impl PongProcess {
+    fn spawn(
+        transport: Transport,
+        payload: Payload,
+        plan: &Plan,
+        extra: &[&str],
+    ) -> anyhow::Result<Self> {
+        let exe = std::env::current_exe().context("cannot locate the sabr executable")?;
+        let child = Command::new(&exe)
+            .args(["bench", "--role", "pong", "--transport", transport.name()])
+            .args(["--payload", payload.name()])
+            .args(["--count", &plan.pong_count().to_string()])
+            .args(extra)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .spawn()
+            .with_context(|| format!("cannot start {} bench --role pong", exe.display()))?;
+        Ok(Self { child })
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// An error if the pong already exited.
+    fn check_running(&mut self) -> anyhow::Result<()> {
+        match self.child.try_wait().context("cannot query the pong process")? {
+            None => Ok(()),
+            Some(status) => bail!("the pong process exited early ({status})"),
+        }
+    }
+
+    /// Waits for the pong to exit after its last message; an error unless it succeeded.
+    fn finish(mut self) -> anyhow::Result<()> {
+        let started = Instant::now();
+        loop {
+            if let Some(status) = self.child.try_wait().context("cannot query the pong process")? {
+                if status.success() {
+                    return Ok(());
+                }
+                bail!("the pong process failed ({status})");
+            }
+            if started.elapsed() > STARTUP_TIMEOUT {
+                bail!("the pong process did not exit in {STARTUP_TIMEOUT:?}");
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+}
+
+impl Drop for PongProcess {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            // Best effort on an error path: the process is ours and may be stuck.
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}

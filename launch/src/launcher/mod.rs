@@ -1,0 +1,99 @@
+//! `sabr launch FILE`: runs a process graph described by a TOML launch file.
+//!
+//! Starts the nodes in dependency order, each once its dependencies announced readiness on
+//! `sabr/graph/lifecycle`; supervises them (restart policy, required nodes, optional heartbeat
+//! watchdog); stops in reverse order on Ctrl-C/SIGTERM, `--duration`, a node announcing the job
+//! done, or a required node ending; then removes the domain's iceoryx2 leftovers. Each node's
+//! stdout and stderr go to `runs/<id>/logs/<node>.log`. See [`spec`] for the file format.
+
+mod run_dir;
+pub mod spec;
+mod supervisor;
+
+pub use run_dir::RunDir;
+pub use supervisor::StopReason;
+
+use anyhow::Context;
+use sabr_node::Domain;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+use supervisor::Supervisor;
+
+/// Arguments of `sabr launch`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct LaunchArgs {
+    /// Launch file (TOML), e.g. launch/graphs/sim-sensing.toml.
+    pub file: PathBuf,
+    /// Directory under which the run directory `<id>/` (logs, recordings) is created.
+    #[arg(long, default_value = "runs")]
+    pub run_dir: PathBuf,
+    /// iceoryx2 domain isolating this graph [default: env SABR_DOMAIN, else "sabr"].
+    #[arg(long)]
+    pub domain: Option<String>,
+    /// Stop the graph (successfully) after this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Directory of the node executables [default: the directory of this executable].
+    #[arg(long)]
+    pub bin_dir: Option<PathBuf>,
+    /// Only validate the launch file and print the start order.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// Runs `sabr launch`: success (0) when the graph was stopped on request, by `--duration` or
+/// because a node announced the job done; failure (1) when a required node ended or could not
+/// be started; an error for a bad launch file or arguments.
+pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
+    let bin_dir = match &args.bin_dir {
+        Some(dir) => dir.clone(),
+        None => std::env::current_exe()
+            .context("cannot locate the sabr executable")?
+            .parent()
+            .map(PathBuf::from)
+            .context("the sabr executable has no directory")?,
+    };
+    let graph = spec::load(&args.file, &bin_dir)?;
+    if args.check {
+        println!("{}: valid; start order:", args.file.display());
+        for node in &graph.nodes {
+            println!("  {} ({})", node.name, node.exec.display());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let duration = match args.duration {
+        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) => anyhow::bail!("--duration must be a positive number of seconds, got {s}"),
+        None => None,
+    };
+    let domain = match &args.domain {
+        Some(name) => Domain::new(name)?,
+        None => Domain::from_env()?,
+    };
+    let run = RunDir::create(&args.run_dir)?;
+    eprintln!(
+        "sabr launch: {} — {} nodes, domain {domain}, run directory {}",
+        args.file.display(),
+        graph.nodes.len(),
+        run.path().display()
+    );
+    let mut supervisor = Supervisor::new(&graph, &run, domain.clone(), duration)?;
+    let reason = supervisor.run();
+    supervisor.say(format_args!("stopping the graph: {reason}"));
+    supervisor.stop_all();
+    let left = sabr_node::release_domain(&domain);
+    if !left.is_empty() {
+        eprintln!("sabr launch: iceoryx2 files of domain {domain} left behind: {left:?}");
+    }
+    eprintln!(
+        "sabr launch: {} — logs in {}",
+        if reason.is_success() { "finished" } else { "FAILED" },
+        run.path().join("logs").display()
+    );
+    Ok(if reason.is_success() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}

@@ -1,0 +1,23 @@
+//! `sabr launch` as a binary of the test package, so `cargo test -p sabr-integration-tests`
+//! builds it next to `sabr-test-node` (same code as `sabr launch`: `sabr::launcher::run`).
+
+use clap::Parser;
+use std::process::ExitCode;
+
+/// Launch a process graph (identical to `sabr launch`).
+#[derive(Debug, Parser)]
+#[command(name = "sabr-test-launch")]
+struct Cli {
+    #[command(flatten)]
+    args: sabr::launcher::LaunchArgs,
+}
+
+fn main() -> ExitCode {
+    match sabr::launcher::run(&Cli::parse().args) {
+        Ok(code) => code,
+        Err(error) => {
+            eprintln!("sabr: {error:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

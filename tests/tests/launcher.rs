@@ -1,0 +1,201 @@
+//! The launcher running real processes: dependency order and readiness, restart after
+//! SIGKILL, required nodes, the stop ladder, the done signal, and launch-file errors.
+
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use sabr_integration_tests::{process_alive, LaunchedGraph};
+use sabr_msgs::{services, EncoderSample, LifecycleState};
+use sabr_node::NodeRuntime;
+use std::time::{Duration, Instant};
+
+const LONG: Duration = Duration::from_secs(15);
+
+fn assert_all_gone(graph: &mut LaunchedGraph) {
+    for pid in graph.node_pids() {
+        assert!(!process_alive(pid), "node process {pid} still alive");
+    }
+    let left = graph.leftover_files();
+    assert!(left.is_empty(), "iceoryx2 files left: {left:?}");
+}
+
+#[test]
+fn starts_in_dependency_order_and_stops_cleanly() {
+    // Written out of order: the launcher must start a, then b, then c.
+    let toml = r#"
+[[node]]
+name = "c"
+exec = "sabr-test-node"
+depends_on = ["b"]
+
+[[node]]
+name = "a"
+exec = "sabr-test-node"
+args = ["--ready-delay-ms", "300"]
+
+[[node]]
+name = "b"
+exec = "sabr-test-node"
+depends_on = ["a"]
+args = ["--ready-delay-ms", "100"]
+"#;
+    let mut graph = LaunchedGraph::start("order", toml, &[], true);
+    let c = graph.wait_ready("c", None, LONG).expect("c ready");
+    let seen = graph.seen().to_vec();
+    let time_of = |node: &str, state: LifecycleState| {
+        seen.iter()
+            .find(|m| m.node.as_str() == node && m.state == state)
+            .map(|m| m.t_ns)
+            .unwrap_or_else(|| panic!("no {state:?} from {node}"))
+    };
+    assert!(time_of("b", LifecycleState::Starting) > time_of("a", LifecycleState::Ready));
+    assert!(time_of("c", LifecycleState::Starting) > time_of("b", LifecycleState::Ready));
+    assert!(c.t_ns > time_of("b", LifecycleState::Ready));
+
+    let status = graph.interrupt(LONG).expect("launcher exits after Ctrl-C");
+    assert!(status.success(), "{status:?}\n{}", graph.output());
+    let output = graph.output();
+    let stop_line = |node: &str| {
+        output
+            .find(&format!("] {node} stopped"))
+            .unwrap_or_else(|| panic!("{node} not stopped:\n{output}"))
+    };
+    assert!(stop_line("c") < stop_line("b") && stop_line("b") < stop_line("a"));
+    let runs = graph.run_dirs();
+    assert_eq!(runs.len(), 1);
+    for node in ["a", "b", "c"] {
+        let log = std::fs::read_to_string(runs[0].join("logs").join(format!("{node}.log")))
+            .expect("node log");
+        assert!(log.contains("ready"), "{node}.log: {log}");
+    }
+    assert_all_gone(&mut graph);
+}
+
+#[test]
+fn a_killed_node_is_restarted_and_data_flows_again_within_2_s() {
+    let toml = r#"
+[[node]]
+name = "anchor"
+exec = "sabr-test-node"
+
+[[node]]
+name = "worker"
+exec = "sabr-test-node"
+args = ["--rate-hz", "200"]
+restart = "on-failure"
+required = false
+"#;
+    let mut graph = LaunchedGraph::start("restart", toml, &[], true);
+    let first = graph.wait_ready("worker", None, LONG).expect("worker ready");
+    graph.wait_ready("anchor", None, LONG).expect("anchor ready");
+    let probe = NodeRuntime::with_domain("probe", graph.domain.clone()).unwrap();
+    let counter = probe
+        .subscriber::<EncoderSample>(services::TEST_COUNTER)
+        .unwrap();
+
+    kill(Pid::from_raw(first.pid as i32), Signal::SIGKILL).unwrap();
+    let killed = Instant::now();
+    let second = graph
+        .wait_ready("worker", Some(first.pid), Duration::from_secs(2))
+        .unwrap_or_else(|| panic!("no restart within 2 s:\n{}", graph.output()));
+    let mut fresh_sample = None;
+    while fresh_sample.is_none() && killed.elapsed() < Duration::from_secs(2) {
+        if let Some(s) = counter.recv_timeout(Duration::from_millis(50)).unwrap() {
+            fresh_sample = (s.counts[0] == i64::from(second.pid)).then_some(s);
+        }
+    }
+    let recovered = killed.elapsed();
+    assert!(fresh_sample.is_some(), "no data from the restarted worker");
+    assert!(recovered < Duration::from_secs(2), "recovered after {recovered:?}");
+    eprintln!("worker recovered {recovered:?} after SIGKILL");
+
+    drop((counter, probe));
+    let status = graph.interrupt(LONG).expect("launcher exits");
+    assert!(status.success(), "{}", graph.output());
+    assert!(graph.output().contains("killed by SIGKILL"), "{}", graph.output());
+    assert_all_gone(&mut graph);
+}
+
+#[test]
+fn a_required_node_ending_stops_the_graph_with_failure() {
+    let toml = r#"
+[[node]]
+name = "steady"
+exec = "sabr-test-node"
+
+[[node]]
+name = "fragile"
+exec = "sabr-test-node"
+args = ["--exit-after-ms", "300", "--exit-code", "3"]
+required = true
+"#;
+    let started = Instant::now();
+    let mut graph = LaunchedGraph::start("required", toml, &[], false);
+    let status = graph.wait_exit(LONG).expect("launcher stops on its own");
+    assert_eq!(status.code(), Some(1), "{}", graph.output());
+    assert!(started.elapsed() < Duration::from_secs(10));
+    let output = graph.output();
+    assert!(output.contains("required node fragile ended: exit code 3"), "{output}");
+    assert!(output.contains("steady stopped"), "{output}");
+    // The launcher itself released the domain: nothing left without any help.
+    let left = sabr_node::domain_files(&graph.domain);
+    assert!(left.is_empty(), "iceoryx2 files left: {left:?}");
+}
+
+#[test]
+fn a_node_ignoring_stop_requests_is_killed_and_cleaned_up() {
+    let toml = r#"
+[graph]
+stop_grace_s = 0.3
+term_grace_s = 0.3
+
+[[node]]
+name = "stubborn"
+exec = "sabr-test-node"
+args = ["--ignore-stop"]
+"#;
+    let mut graph = LaunchedGraph::start("ladder", toml, &["--duration", "1.0"], false);
+    let status = graph.wait_exit(LONG).expect("launcher stops after the duration");
+    let output = graph.output();
+    assert!(status.success(), "{output}");
+    assert!(output.contains("duration elapsed"), "{output}");
+    assert!(output.contains("sending SIGTERM"), "{output}");
+    assert!(output.contains("sending SIGKILL"), "{output}");
+    assert!(output.contains("stubborn stopped (killed by SIGKILL)"), "{output}");
+    let left = sabr_node::domain_files(&graph.domain);
+    assert!(left.is_empty(), "stale iceoryx2 files of the killed node: {left:?}");
+}
+
+#[test]
+fn a_node_announcing_done_ends_the_graph_with_success() {
+    let toml = r#"
+[[node]]
+name = "idle"
+exec = "sabr-test-node"
+
+[[node]]
+name = "session"
+exec = "sabr-test-node"
+args = ["--done-after-ms", "300"]
+depends_on = ["idle"]
+"#;
+    let mut graph = LaunchedGraph::start("done", toml, &[], false);
+    let status = graph.wait_exit(LONG).expect("launcher stops on done");
+    let output = graph.output();
+    assert!(status.success(), "{output}");
+    assert!(output.contains("node session announced the job done"), "{output}");
+    assert!(sabr_node::domain_files(&graph.domain).is_empty());
+}
+
+#[test]
+fn a_malformed_launch_file_is_rejected_with_file_line_and_reason() {
+    let toml = "[[node]]\nname = \"a\"\nexec = \"sabr-test-node\"\ndepends_on = [\"nowhere\"]\n";
+    let mut graph = LaunchedGraph::start("malformed", toml, &[], false);
+    let status = graph.wait_exit(LONG).expect("launcher exits");
+    assert!(!status.success());
+    let output = graph.output();
+    assert!(
+        output.contains("graph.toml:4:15: node \"a\" depends on unknown node \"nowhere\""),
+        "{output}"
+    );
+    assert!(graph.run_dirs().is_empty(), "a run directory was created: {output}");
+}
