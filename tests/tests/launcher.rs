@@ -5,6 +5,8 @@ use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_integration_tests::{process_alive, LaunchedGraph};
 use sabr_msgs::{services, EncoderSample, LifecycleState};
+use sabr_node::iceoryx2::node::{Node, NodeState};
+use sabr_node::iceoryx2::prelude::{ipc, CallbackProgression};
 use sabr_node::NodeRuntime;
 use std::time::{Duration, Instant};
 
@@ -85,8 +87,12 @@ restart = "on-failure"
 required = false
 "#;
     let mut graph = LaunchedGraph::start("restart", toml, &[], true);
-    let first = graph.wait_ready("worker", None, LONG).expect("worker ready");
-    graph.wait_ready("anchor", None, LONG).expect("anchor ready");
+    let first = graph
+        .wait_ready("worker", None, LONG)
+        .expect("worker ready");
+    graph
+        .wait_ready("anchor", None, LONG)
+        .expect("anchor ready");
     let probe = NodeRuntime::with_domain("probe", graph.domain.clone()).unwrap();
     let counter = probe
         .subscriber::<EncoderSample>(services::TEST_COUNTER)
@@ -105,13 +111,58 @@ required = false
     }
     let recovered = killed.elapsed();
     assert!(fresh_sample.is_some(), "no data from the restarted worker");
-    assert!(recovered < Duration::from_secs(2), "recovered after {recovered:?}");
+    assert!(
+        recovered < Duration::from_secs(2),
+        "recovered after {recovered:?}"
+    );
     eprintln!("worker recovered {recovered:?} after SIGKILL");
+    // The launcher removed the killed node's resources when it noticed the death.
+    let mut dead = 0;
+    Node::<ipc::Service>::list(&graph.domain.iceoryx_config(), |state| {
+        dead += usize::from(matches!(state, NodeState::Dead(_)));
+        CallbackProgression::Continue
+    })
+    .unwrap();
+    assert_eq!(dead, 0, "stale resources of the killed node remain");
 
     drop((counter, probe));
     let status = graph.interrupt(LONG).expect("launcher exits");
     assert!(status.success(), "{}", graph.output());
-    assert!(graph.output().contains("killed by SIGKILL"), "{}", graph.output());
+    assert!(
+        graph.output().contains("killed by SIGKILL"),
+        "{}",
+        graph.output()
+    );
+    assert_all_gone(&mut graph);
+}
+
+#[test]
+fn a_node_without_heartbeat_is_killed_and_restarted() {
+    let toml = r#"
+[[node]]
+name = "anchor"
+exec = "sabr-test-node"
+
+[[node]]
+name = "hanging"
+exec = "sabr-test-node"
+args = ["--hang-after-ms", "200"]
+restart = "on-failure"
+required = false
+heartbeat_timeout_s = 0.5
+"#;
+    let mut graph = LaunchedGraph::start("heartbeat", toml, &[], true);
+    let first = graph.wait_ready("hanging", None, LONG).expect("ready");
+    let second = graph.wait_ready("hanging", Some(first.pid), LONG);
+    assert!(second.is_some(), "not restarted:\n{}", graph.output());
+    assert!(!process_alive(first.pid), "the hung process was not killed");
+    let output = graph.output();
+    assert!(
+        output.contains("hanging silent for 0.5 s (no heartbeat); killing it"),
+        "{output}"
+    );
+    let status = graph.interrupt(LONG).expect("launcher exits");
+    assert!(status.success(), "{}", graph.output());
     assert_all_gone(&mut graph);
 }
 
@@ -134,7 +185,10 @@ required = true
     assert_eq!(status.code(), Some(1), "{}", graph.output());
     assert!(started.elapsed() < Duration::from_secs(10));
     let output = graph.output();
-    assert!(output.contains("required node fragile ended: exit code 3"), "{output}");
+    assert!(
+        output.contains("required node fragile ended: exit code 3"),
+        "{output}"
+    );
     assert!(output.contains("steady stopped"), "{output}");
     // The launcher itself released the domain: nothing left without any help.
     let left = sabr_node::domain_files(&graph.domain);
@@ -154,15 +208,23 @@ exec = "sabr-test-node"
 args = ["--ignore-stop"]
 "#;
     let mut graph = LaunchedGraph::start("ladder", toml, &["--duration", "1.0"], false);
-    let status = graph.wait_exit(LONG).expect("launcher stops after the duration");
+    let status = graph
+        .wait_exit(LONG)
+        .expect("launcher stops after the duration");
     let output = graph.output();
     assert!(status.success(), "{output}");
     assert!(output.contains("duration elapsed"), "{output}");
     assert!(output.contains("sending SIGTERM"), "{output}");
     assert!(output.contains("sending SIGKILL"), "{output}");
-    assert!(output.contains("stubborn stopped (killed by SIGKILL)"), "{output}");
+    assert!(
+        output.contains("stubborn stopped (killed by SIGKILL)"),
+        "{output}"
+    );
     let left = sabr_node::domain_files(&graph.domain);
-    assert!(left.is_empty(), "stale iceoryx2 files of the killed node: {left:?}");
+    assert!(
+        left.is_empty(),
+        "stale iceoryx2 files of the killed node: {left:?}"
+    );
 }
 
 #[test]
@@ -182,7 +244,10 @@ depends_on = ["idle"]
     let status = graph.wait_exit(LONG).expect("launcher stops on done");
     let output = graph.output();
     assert!(status.success(), "{output}");
-    assert!(output.contains("node session announced the job done"), "{output}");
+    assert!(
+        output.contains("node session announced the job done"),
+        "{output}"
+    );
     assert!(sabr_node::domain_files(&graph.domain).is_empty());
 }
 
@@ -197,5 +262,8 @@ fn a_malformed_launch_file_is_rejected_with_file_line_and_reason() {
         output.contains("graph.toml:4:15: node \"a\" depends on unknown node \"nowhere\""),
         "{output}"
     );
-    assert!(graph.run_dirs().is_empty(), "a run directory was created: {output}");
+    assert!(
+        graph.run_dirs().is_empty(),
+        "a run directory was created: {output}"
+    );
 }

@@ -154,11 +154,17 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         }
         println!("\nCPU use of the waiting pong process (1.0 = one core):");
         for (name, share) in &results.idle {
+            let goal = if share.cores <= hops::IDLE_CPU_LIMIT_CORES {
+                "met"
+            } else {
+                "MISSED"
+            };
             println!(
-                "  {name:<32} {:.3} (±{:.3} over {:.1} s)",
+                "  {name:<32} {:.3} (±{:.3} over {:.1} s; idle goal ≤ {}: {goal})",
                 share.cores,
                 share.resolution,
-                share.window.as_secs_f64()
+                share.window.as_secs_f64(),
+                hops::IDLE_CPU_LIMIT_CORES
             );
         }
     }

@@ -144,7 +144,7 @@ fn measure(
     transport: Transport,
     payload: Payload,
     plan: &Plan,
-    mut peer: PongProcess,
+    peer: PongProcess,
     mut round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
 ) -> anyhow::Result<PingPong> {
     let name = baseline_name(transport, payload);

@@ -88,7 +88,11 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     }
     eprintln!(
         "sabr launch: {} — logs in {}",
-        if reason.is_success() { "finished" } else { "FAILED" },
+        if reason.is_success() {
+            "finished"
+        } else {
+            "FAILED"
+        },
         run.path().join("logs").display()
     );
     Ok(if reason.is_success() {

@@ -178,15 +178,22 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
     for entry in &parsed.node {
         let node = entry.get_ref();
         let name = node.name.get_ref();
-        sabr_node::validate_node_name(name)
-            .map_err(|e| at(node.name.span(), e.to_string()))?;
+        sabr_node::validate_node_name(name).map_err(|e| at(node.name.span(), e.to_string()))?;
         if index.insert(name.clone(), nodes.len()).is_some() {
-            return Err(at(node.name.span(), format!("duplicate node name {name:?}")));
+            return Err(at(
+                node.name.span(),
+                format!("duplicate node name {name:?}"),
+            ));
         }
         let exec = resolve_exec(file, bin_dir, node.exec.get_ref())
             .map_err(|reason| at(node.exec.span(), reason))?;
         let heartbeat_timeout = match &node.heartbeat_timeout_s {
-            Some(_) => Some(seconds(&node.heartbeat_timeout_s, 0.0, "heartbeat_timeout_s", &at)?),
+            Some(_) => Some(seconds(
+                &node.heartbeat_timeout_s,
+                0.0,
+                "heartbeat_timeout_s",
+                &at,
+            )?),
             None => None,
         };
         nodes.push(NodeSpec {
@@ -194,7 +201,11 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             exec,
             args: node.args.clone(),
             env: node.env.clone(),
-            depends_on: node.depends_on.iter().map(|d| d.get_ref().clone()).collect(),
+            depends_on: node
+                .depends_on
+                .iter()
+                .map(|d| d.get_ref().clone())
+                .collect(),
             restart: node.restart,
             max_restarts: node.max_restarts,
             restart_backoff: seconds(&node.restart_backoff_s, 0.1, "restart_backoff_s", &at)?,
@@ -217,7 +228,10 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
                 ));
             }
             if dep.get_ref() == node.name.get_ref() {
-                return Err(at(dep.span(), format!("node {:?} depends on itself", dep.get_ref())));
+                return Err(at(
+                    dep.span(),
+                    format!("node {:?} depends on itself", dep.get_ref()),
+                ));
             }
         }
     }
@@ -267,12 +281,17 @@ fn start_order(nodes: &[NodeSpec]) -> Result<Vec<usize>, Vec<String>> {
 }
 
 /// Follows unstarted dependencies from the first blocked node until a name repeats.
-fn find_cycle(nodes: &[NodeSpec], position: &HashMap<&str, usize>, started: &[bool]) -> Vec<String> {
+fn find_cycle(
+    nodes: &[NodeSpec],
+    position: &HashMap<&str, usize>,
+    started: &[bool],
+) -> Vec<String> {
     let mut path: Vec<usize> = Vec::new();
     let mut current = (0..nodes.len()).find(|&i| !started[i]).unwrap_or(0);
     loop {
         if let Some(at) = path.iter().position(|&p| p == current) {
-            let mut names: Vec<String> = path[at..].iter().map(|&i| nodes[i].name.clone()).collect();
+            let mut names: Vec<String> =
+                path[at..].iter().map(|&i| nodes[i].name.clone()).collect();
             names.push(nodes[current].name.clone());
             return names;
         }
@@ -319,7 +338,10 @@ fn seconds(
             if s.is_finite() && (0.0..=86_400.0).contains(&s) {
                 Ok(Duration::from_secs_f64(s))
             } else {
-                Err(at(v.span(), format!("{key} must be between 0 and 86400 s, got {s}")))
+                Err(at(
+                    v.span(),
+                    format!("{key} must be between 0 and 86400 s, got {s}"),
+                ))
             }
         }
     }
@@ -410,7 +432,8 @@ exec = "a"
         assert_eq!(e.line, 4);
         assert!(e.reason.contains("unknown node \"ghost\""), "{e}");
 
-        let e = error("[[node]]\nname = \"x\"\nexec = \"a\"\n[[node]]\nname = \"x\"\nexec = \"b\"\n");
+        let e =
+            error("[[node]]\nname = \"x\"\nexec = \"a\"\n[[node]]\nname = \"x\"\nexec = \"b\"\n");
         assert_eq!(e.line, 5);
         assert!(e.reason.contains("duplicate"), "{e}");
     }
@@ -441,5 +464,33 @@ exec = "a"
     fn syntax_errors_carry_a_position() {
         let e = error("[[node]]\nname = \"x\nexec = \"a\"\n");
         assert_eq!(e.line, 2);
+    }
+
+    #[test]
+    fn shipped_graphs_are_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
+        let mut checked = 0;
+        for entry in std::fs::read_dir(&dir).unwrap().flatten() {
+            let file = entry.path();
+            if file.extension().is_none_or(|e| e != "toml") {
+                continue;
+            }
+            let text = std::fs::read_to_string(&file).unwrap();
+            // Fake executables for every exec, so only the file itself is judged.
+            let bins = tempfile::tempdir().unwrap();
+            let table: toml::Table = toml::from_str(&text).unwrap();
+            for node in table["node"].as_array().unwrap() {
+                let exec = node["exec"].as_str().unwrap();
+                std::fs::write(bins.path().join(exec), "").unwrap();
+            }
+            let spec = parse(&file, &text, bins.path()).unwrap_or_else(|e| panic!("{e}"));
+            for (i, node) in spec.nodes.iter().enumerate() {
+                for dep in &node.depends_on {
+                    assert!(spec.nodes[..i].iter().any(|n| &n.name == dep), "{dep}");
+                }
+            }
+            checked += 1;
+        }
+        assert!(checked >= 1, "no launch files in {}", dir.display());
     }
 }

@@ -127,7 +127,10 @@ impl<'a> Supervisor<'a> {
             if let Err(reason) = self.spawn(i) {
                 return reason;
             }
-            while matches!(self.procs[i].phase, Phase::Starting { .. } | Phase::Backoff { .. }) {
+            while matches!(
+                self.procs[i].phase,
+                Phase::Starting { .. } | Phase::Backoff { .. }
+            ) {
                 if let Err(reason) = self.tick() {
                     return reason;
                 }
@@ -168,12 +171,17 @@ impl<'a> Supervisor<'a> {
             }
             match status {
                 Some(status) => self.say(format_args!("{name} stopped ({})", describe(status))),
-                None => self.say(format_args!("{name} could not be stopped (pid {})", child.id())),
+                None => self.say(format_args!(
+                    "{name} could not be stopped (pid {})",
+                    child.id()
+                )),
             }
         }
         let removed = self.observer.cleanup_dead_nodes();
         if removed > 0 {
-            self.say(format_args!("removed the resources of {removed} dead node(s)"));
+            self.say(format_args!(
+                "removed the resources of {removed} dead node(s)"
+            ));
         }
     }
 
@@ -231,8 +239,12 @@ impl<'a> Supervisor<'a> {
                 }
                 LifecycleState::Done => {
                     self.procs[i].announced_done = true;
-                    self.say(format_args!("{} announced the job done", self.procs[i].spec.name));
-                    self.done.get_or_insert_with(|| message.node.as_str().to_owned());
+                    self.say(format_args!(
+                        "{} announced the job done",
+                        self.procs[i].spec.name
+                    ));
+                    self.done
+                        .get_or_insert_with(|| message.node.as_str().to_owned());
                 }
                 LifecycleState::Starting | LifecycleState::Stopping => {}
             }
@@ -313,7 +325,11 @@ impl<'a> Supervisor<'a> {
         proc.phase = Phase::Ended;
         let required = proc.spec.required;
         let done = proc.announced_done;
-        let why = if wanted { "restart limit reached" } else { "not restarted" };
+        let why = if wanted {
+            "restart limit reached"
+        } else {
+            "not restarted"
+        };
         self.say(format_args!("{name} ended ({detail}){cleaned}; {why}"));
         if required && !done {
             return Err(StopReason::RequiredEnded {
@@ -335,10 +351,18 @@ impl<'a> Supervisor<'a> {
     fn spawn(&mut self, i: usize) -> Result<(), StopReason> {
         self.procs[i].starts += 1;
         let starts = self.procs[i].starts;
-        let label = if starts == 1 { "starting" } else { "restarting" };
+        let label = if starts == 1 {
+            "starting"
+        } else {
+            "restarting"
+        };
         match self.start_process(&self.procs[i].spec, label, starts) {
             Ok(child) => {
-                self.say(format_args!("{label} {} (pid {})", self.procs[i].spec.name, child.id()));
+                self.say(format_args!(
+                    "{label} {} (pid {})",
+                    self.procs[i].spec.name,
+                    child.id()
+                ));
                 let proc = &mut self.procs[i];
                 proc.child = Some(child);
                 proc.phase = Phase::Starting {
@@ -348,7 +372,10 @@ impl<'a> Supervisor<'a> {
                 Ok(())
             }
             Err(error) => {
-                self.say(format_args!("cannot start {}: {error:#}", self.procs[i].spec.name));
+                self.say(format_args!(
+                    "cannot start {}: {error:#}",
+                    self.procs[i].spec.name
+                ));
                 self.procs[i].phase = Phase::Starting {
                     since: Instant::now(),
                 };
@@ -359,7 +386,11 @@ impl<'a> Supervisor<'a> {
 
     fn start_process(&self, spec: &NodeSpec, label: &str, starts: u32) -> anyhow::Result<Child> {
         let mut log = self.run.open_log(&spec.name)?;
-        writeln!(log, "=== sabr launch: {label} {} (start #{starts}) ===", spec.name)?;
+        writeln!(
+            log,
+            "=== sabr launch: {label} {} (start #{starts}) ===",
+            spec.name
+        )?;
         let mut command = Command::new(&spec.exec);
         command
             .args(&spec.args)

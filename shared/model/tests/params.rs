@@ -98,7 +98,7 @@ fn a_calibrated_model_round_trips_through_toml() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(3000))]
+    #![proptest_config(ProptestConfig::with_cases(1000))]
 
     /// A pose built from a rotation vector with components within ±1 rad (as files and
     /// calibrators build them: mountings are off by a few degrees) round-trips bit for bit.

@@ -113,7 +113,10 @@ mod tests {
     fn round_trips_text_up_to_capacity() {
         let text: FixedString<8> = FixedString::new("encoder").unwrap();
         assert_eq!(text.as_str(), "encoder");
-        assert_eq!(FixedString::<8>::new("12345678").unwrap().as_str(), "12345678");
+        assert_eq!(
+            FixedString::<8>::new("12345678").unwrap().as_str(),
+            "12345678"
+        );
         assert!(FixedString::<8>::default().is_empty());
     }
 

@@ -24,8 +24,8 @@ pub use motion::{
     ParameterSetAnnouncement, PhaseMark,
 };
 pub use sensing::{
-    EncoderSample, MatchQuality, MatchedSample, RigTruth, Tool, ToolSample, ToolStatus,
-    TrackerFrame, JOINTS, TOOLS,
+    CounterLatch, EncoderSample, LatencySource, MatchQuality, MatchedSample, RigTruth, Tool,
+    ToolSample, ToolStatus, TrackerFrame, JOINTS, TOOLS,
 };
 
 /// Re-export of the derive and trait every message implements, for services that define

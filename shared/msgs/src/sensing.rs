@@ -20,6 +20,20 @@ pub struct EncoderSample {
     pub counts: [i64; JOINTS],
 }
 
+/// The rig's quadrature counter register as latched by the (simulated) hardware, published by
+/// the rig at ≥ 1 kHz on [`crate::services::RIG_COUNTERS`] and sampled by `encoders`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("sabr.CounterLatch.v1")]
+pub struct CounterLatch {
+    /// Sequence number, +1 per latch.
+    pub seq: u64,
+    /// Host `CLOCK_MONOTONIC` time at which the counts were latched, ns.
+    pub latch_t_ns: i64,
+    /// Raw quadrature counts of joints 1..5 (0 at power-up).
+    pub counts: [i64; JOINTS],
+}
+
 /// The tools of a tracker frame, in their array order.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, ZeroCopySend)]
@@ -106,23 +120,44 @@ impl TrackerFrame {
     }
 }
 
-/// How well a tracker frame's exposure time was bracketed by encoder samples.
+/// Where the tracker latency used by `sync` came from.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, ZeroCopySend)]
+pub enum LatencySource {
+    /// Configured on the command line (`sabr-sync --latency-ms`).
+    #[default]
+    Configured,
+    /// The `[calibration] latency_ms` of the parameter set announced by `calibrator`.
+    Calibrated,
+}
+
+/// How well a tracker frame's exposure time was estimated and bracketed by encoder samples.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.MatchQuality.v1")]
+#[type_name("sabr.MatchQuality.v2")]
 pub struct MatchQuality {
     /// Time between the two encoder samples interpolated between, ns (≈1 ms when healthy).
     pub interpolation_span_ns: i64,
     /// Distance from the exposure time to the nearest encoder sample, ns.
     pub nearest_sample_ns: i64,
-    /// Estimated latency used: arrival time minus exposure time, ns.
+    /// Latency used: the frame clock line at this frame minus the exposure time, ns.
     pub latency_ns: i64,
+    /// Where `latency_ns` came from.
+    pub latency_source: LatencySource,
+    /// This frame's arrival time minus the frame clock line, ns (large and positive: a late
+    /// frame).
+    pub clock_residual_ns: i64,
+    /// Robust spread (1.4826 · MAD) of the arrival times about the clock line over the fit
+    /// window, ns: the arrival jitter.
+    pub clock_spread_ns: i64,
+    /// Tracker frames in the clock fit window.
+    pub clock_frames: u32,
 }
 
 /// A tracker frame paired with the encoder state at its exposure time (published by `sync`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.MatchedSample.v1")]
+#[type_name("sabr.MatchedSample.v2")]
 pub struct MatchedSample {
     /// Sequence number, +1 per matched sample.
     pub seq: u64,

@@ -21,6 +21,12 @@ pub const IK_SOLVE: &str = "sabr/ik/solve";
 pub const CALIBRATOR_PARAMETERS: &str = "sabr/calibrator/parameters";
 /// Publish-subscribe [`crate::RigTruth`] from the simulated rig (tests and benchmarks only).
 pub const RIG_TRUTH: &str = "sabr/rig/truth";
+/// Publish-subscribe [`crate::CounterLatch`] from the rig: the quadrature counter register
+/// (≥ 1 kHz) that `encoders` samples.
+pub const RIG_COUNTERS: &str = "sabr/rig/counters";
+/// Publish-subscribe [`crate::PhaseMark`] from the rig when it plays the session plan itself
+/// (`sabr-rig --autoplay`, no `motion` node), one per finished phase.
+pub const RIG_PHASES: &str = "sabr/rig/phases";
 /// Publish-subscribe [`crate::Lifecycle`] from every node to the launcher: readiness,
 /// heartbeats, stopping, done.
 pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
@@ -30,7 +36,7 @@ pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
 pub const TEST_COUNTER: &str = "sabr/test/counter";
 
 /// All publish-subscribe and request-response services above, for listings and checks.
-pub const ALL: [&str; 11] = [
+pub const ALL: [&str; 13] = [
     ENCODER_SAMPLES,
     TRACKER_FRAMES,
     SYNC_MATCHED,
@@ -40,6 +46,8 @@ pub const ALL: [&str; 11] = [
     IK_SOLVE,
     CALIBRATOR_PARAMETERS,
     RIG_TRUTH,
+    RIG_COUNTERS,
+    RIG_PHASES,
     GRAPH_LIFECYCLE,
     TEST_COUNTER,
 ];

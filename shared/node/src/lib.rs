@@ -8,6 +8,30 @@
 //! - [`Deadline`]: notices a stalled or dead peer while waiting.
 //! - [`GraphObserver`]: watches the lifecycle of all nodes of a domain (used by the launcher).
 //! - [`monotonic_ns`]: the clock of every `t_ns`.
+//!
+//! A consumer that wakes on data and notices a stalled producer:
+//!
+//! ```no_run
+//! use sabr_msgs::{services, EncoderSample, TrackerFrame};
+//! use sabr_node::{Deadline, NodeRuntime};
+//! use std::time::Duration;
+//!
+//! fn main() -> Result<(), sabr_node::NodeError> {
+//!     let mut rt = NodeRuntime::start("sync")?;
+//!     let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
+//!     let frames = rt.subscriber::<TrackerFrame>(services::TRACKER_FRAMES)?;
+//!     let mut encoder_deadline = Deadline::new(Duration::from_millis(20));
+//!     rt.run_on_data(&[&encoders, &frames], Duration::from_millis(10), |_ctx| {
+//!         encoders.drain(|_sample| encoder_deadline.feed())?;
+//!         frames.drain(|_frame| { /* match and publish */ })?;
+//!         if encoder_deadline.expired() {
+//!             tracing::warn!(silence = ?encoder_deadline.silence(), "encoder stream stalled");
+//!         }
+//!         Ok::<_, sabr_node::NodeError>(())
+//!     })?;
+//!     Ok(())
+//! }
+//! ```
 
 mod deadline;
 mod domain;
@@ -66,7 +90,11 @@ pub enum NodeError {
 }
 
 impl NodeError {
-    pub(crate) fn port(service: &str, operation: &'static str, error: impl std::fmt::Debug) -> Self {
+    pub(crate) fn port(
+        service: &str,
+        operation: &'static str,
+        error: impl std::fmt::Debug,
+    ) -> Self {
         NodeError::Port {
             service: service.to_owned(),
             operation,

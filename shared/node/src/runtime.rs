@@ -380,7 +380,10 @@ impl NodeRuntime {
         let heartbeat = match waitset.attach_interval(HEARTBEAT_PERIOD) {
             Ok(guard) => guard,
             Err(error) => {
-                tracing::error!(?error, "cannot attach the heartbeat interval; leaving the loop");
+                tracing::error!(
+                    ?error,
+                    "cannot attach the heartbeat interval; leaving the loop"
+                );
                 return Ok(self.leave(Exit::Signal));
             }
         };
@@ -496,7 +499,9 @@ pub fn validate_node_name(name: &str) -> Result<NodeLabel, NodeError> {
         .bytes()
         .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
     {
-        return Err(invalid("only ASCII letters, digits, '-' and '_' are allowed"));
+        return Err(invalid(
+            "only ASCII letters, digits, '-' and '_' are allowed",
+        ));
     }
     NodeLabel::new(name).map_err(|e| invalid(&e.to_string()))
 }

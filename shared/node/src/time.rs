@@ -22,6 +22,10 @@ mod tests {
         let b = monotonic_ns();
         let std_elapsed = std_start.elapsed().as_nanos() as i64;
         assert!(b - a >= 5_000_000, "advanced only {} ns", b - a);
-        assert!(b - a <= std_elapsed, "{} ns > std's {std_elapsed} ns", b - a);
+        assert!(
+            b - a <= std_elapsed,
+            "{} ns > std's {std_elapsed} ns",
+            b - a
+        );
     }
 }

@@ -18,8 +18,12 @@ fn release(domain: &Domain) {
 fn samples_flow_and_a_silent_publisher_times_out() {
     let domain = unique_domain("flow");
     let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
-    let publisher = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
-    let subscriber = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let publisher = rt
+        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let subscriber = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
     let sample = EncoderSample {
         seq: 7,
         t_ns: sabr_node::monotonic_ns(),
@@ -30,9 +34,7 @@ fn samples_flow_and_a_silent_publisher_times_out() {
     assert_eq!(received, Some(sample));
 
     let start = Instant::now();
-    let nothing = subscriber
-        .recv_timeout(Duration::from_millis(50))
-        .unwrap();
+    let nothing = subscriber.recv_timeout(Duration::from_millis(50)).unwrap();
     assert_eq!(nothing, None);
     assert!(start.elapsed() >= Duration::from_millis(50));
     drop((publisher, subscriber, rt));
@@ -43,8 +45,12 @@ fn samples_flow_and_a_silent_publisher_times_out() {
 fn run_on_data_wakes_on_samples_and_idles_without() {
     let domain = unique_domain("wake");
     let mut rt = NodeRuntime::with_domain("consumer", domain.clone()).unwrap();
-    let publisher = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
-    let subscriber = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES).unwrap();
+    let publisher = rt
+        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let subscriber = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
     let mut seen = Vec::new();
     let mut idle_calls = 0;
     let exit = rt
@@ -100,7 +106,10 @@ fn observer_sees_lifecycle_and_a_clean_exit_leaves_no_files() {
                 LifecycleState::Stopping
             ]
         );
-        assert!(!domain_files(&domain).is_empty(), "observer should own files");
+        assert!(
+            !domain_files(&domain).is_empty(),
+            "observer should own files"
+        );
     }
     let left = release_domain(&domain);
     assert!(left.is_empty(), "left behind: {left:?}");

@@ -229,6 +229,17 @@ impl Session {
         self.host_start_ns
     }
 
+    /// A fresh tracker emulator of this session (its truth, configuration and noise stream),
+    /// the one [`Session::record`] uses; for driving the tracker in real time (the rig).
+    pub fn tracker_emulator(&self) -> TrackerEmulator {
+        TrackerEmulator::new(
+            self.config.tracker.clone(),
+            self.tracker.clone(),
+            self.robot.params.markers.base_to_robot,
+            stream(self.config.seed, Stream::Tracker),
+        )
+    }
+
     /// Runs the session: drives the true robot through the plan in time order of encoder
     /// samples, tracker exposures and validation instants, and records everything.
     pub fn record(&self) -> Result<(Recording, Truth), SimError> {

@@ -26,6 +26,9 @@ struct Args {
     /// Announce the graph's job done after this long, ms.
     #[arg(long)]
     done_after_ms: Option<u64>,
+    /// Hang (alive, but no heartbeat and no data) after this long, ms.
+    #[arg(long)]
+    hang_after_ms: Option<u64>,
     /// Ignore stop requests (SIGINT/SIGTERM): only SIGKILL ends it.
     #[arg(long)]
     ignore_stop: bool,
@@ -67,9 +70,13 @@ fn run(args: &Args) -> Result<ExitCode, sabr_node::NodeError> {
             counter.send(sample())?;
         }
     }
-    let after = |ms: Option<u64>| ms.is_some_and(|ms| started.elapsed() >= Duration::from_millis(ms));
+    let after =
+        |ms: Option<u64>| ms.is_some_and(|ms| started.elapsed() >= Duration::from_millis(ms));
     let exit = rt.run_loop(period, |ctx| {
         counter.send(sample())?;
+        if after(args.hang_after_ms) {
+            std::thread::sleep(Duration::from_secs(3600));
+        }
         if after(args.done_after_ms) {
             ctx.finish_graph();
         } else if after(args.exit_after_ms) {
