@@ -205,7 +205,7 @@ mod tests {
             .map(|l| l.split_whitespace().map(|f| f.parse().unwrap()).collect())
             .collect();
         assert!(rows.len() > 10, "only {} rows", rows.len());
-        assert_eq!(rows[0][..3], [1.0, 0.001, 1.0]);
+        assert_eq!(rows[0][..3], [1.0, 0.0, 1.0]);
         for pair in rows.windows(2) {
             assert!(pair[1][0] >= pair[0][0], "values not monotone: {pair:?}");
             assert!(pair[1][1] > pair[0][1], "percentiles not increasing: {pair:?}");

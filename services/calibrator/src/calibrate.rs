@@ -328,10 +328,14 @@ fn validation_report(fit: &JointFit, holds: &[crate::validation::Hold]) -> Valid
         Some(error) => ("validation_tip_sphere", Some(error)),
         None => ("cross_validated_tip_phase", cross),
     };
+    let tip_reading_noise_mm = fit.noise.tip.position_covariance.trace().sqrt();
     ValidationReport {
         tip_error_source: source.into(),
         tip_error,
         cross_validated_tip: cross,
+        tip_reading_noise_mm,
+        cross_validated_excess_mm: cross
+            .map(|c| (c.rms_mm.powi(2) - tip_reading_noise_mm.powi(2)).max(0.0).sqrt()),
         predicted_tip_std: std,
         holds: holds.len(),
         method: format!(

@@ -69,12 +69,15 @@ pub fn render(report: &Report) -> String {
          <tr><th>tip error, joint fit: RMS / max (n) mm</th><td>{}</td></tr>\
          <tr><th>source of the tip error</th><td>{}</td></tr>\
          <tr><th>cross-validated tip (tip phase) mm</th><td>{}</td></tr>\
+         <tr><th>tip reading noise / cross-validated excess mm</th><td>{} / {}</td></tr>\
          <tr><th>predicted tip std at validation holds mm</th><td>{}</td></tr></table><p>{}</p>",
         number(report.latency_ms),
         number(report.latency_std_ms),
         tip(&v.tip_error),
         escape(&v.tip_error_source),
         tip(&v.cross_validated_tip),
+        number(v.tip_reading_noise_mm),
+        v.cross_validated_excess_mm.map_or("–".into(), number),
         tip(&v.predicted_tip_std),
         escape(&v.method)
     );

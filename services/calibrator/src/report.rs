@@ -281,6 +281,11 @@ pub struct ValidationReport {
     pub tip_error: Option<TipError>,
     /// Cross-validated tip error over the tip phase (vs. the noisy tip readings), mm.
     pub cross_validated_tip: Option<TipError>,
+    /// 3-D RMS noise of a tip-sphere reading (mm), from the joint fit's residuals.
+    pub tip_reading_noise_mm: f64,
+    /// What the cross-validated error adds to the reading noise:
+    /// `√max(0, rms² − noise²)` (mm), an estimate of the tip error itself.
+    pub cross_validated_excess_mm: Option<f64>,
     /// Standard deviation of the predicted tip at the validation holds, from the parameter
     /// covariance (RMS and max over the holds, mm).
     pub predicted_tip_std: Option<TipError>,

@@ -20,9 +20,7 @@ impl ServoConfig {
     /// the motor shaft) for an encoder of `counts_per_rev` counts per revolution.
     pub fn new(tau_s: f64, max_motor_rad_s: f64, counts_per_rev: u32) -> Result<Self, String> {
         if !(tau_s.is_finite() && tau_s >= 0.0) {
-            return Err(format!(
-                "servo time constant must be ≥ 0 s, got {tau_s} s"
-            ));
+            return Err(format!("servo time constant must be ≥ 0 s, got {tau_s} s"));
         }
         if !(max_motor_rad_s.is_finite() && max_motor_rad_s > 0.0) {
             return Err(format!(

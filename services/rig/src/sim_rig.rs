@@ -118,13 +118,12 @@ impl SimRig {
     }
 
     fn capture(&mut self, tip_attached: bool) -> Result<Capture, SimError> {
-        let unreachable = |robot: &TrueRobot, error: sabr_model::KinematicsError| {
-            SimError::Unreachable {
+        let unreachable =
+            |robot: &TrueRobot, error: sabr_model::KinematicsError| SimError::Unreachable {
                 t_s: robot.time_ns() as f64 * 1e-9,
                 joints: robot.joints(),
                 reason: error.to_string(),
-            }
-        };
+            };
         let tools = self
             .robot
             .tool_poses()
@@ -193,10 +192,18 @@ mod tests {
         let coarse = rig.advance(1_000_000_000, &target, |_| false).unwrap();
         let mut fine = Vec::new();
         for k in 1..=1000 {
-            fine.extend(reference.advance(k * 1_000_000, &target, |_| false).unwrap());
+            fine.extend(
+                reference
+                    .advance(k * 1_000_000, &target, |_| false)
+                    .unwrap(),
+            );
         }
         assert_eq!(coarse.len(), fine.len());
-        assert!((19..=21).contains(&coarse.len()), "{} frames in 1 s", coarse.len());
+        assert!(
+            (19..=21).contains(&coarse.len()),
+            "{} frames in 1 s",
+            coarse.len()
+        );
         for (a, b) in coarse.iter().zip(&fine) {
             assert_eq!(a.frame.exposure, b.frame.exposure);
             assert_eq!(a.counts, b.counts);
@@ -250,6 +257,9 @@ mod tests {
         q[2] += 0.01;
         let counts = rig.counts_for_joints(&q);
         let expected = 0.01 / session.robot_truth().params.joints.gear_ratio[2] * 4000.0 / TAU;
-        assert!((counts[2] - expected).abs() < 1e-6, "{counts:?} vs {expected}");
+        assert!(
+            (counts[2] - expected).abs() < 1e-6,
+            "{counts:?} vs {expected}"
+        );
     }
 }

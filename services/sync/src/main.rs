@@ -1,1 +1,325 @@
-fn main() {}
+//! `sabr-sync`: matches tracker frames to encoder samples and publishes matched samples.
+//!
+//! Subscribes to `sabr/encoders/samples`, `sabr/tracker/frames` and
+//! `sabr/calibrator/parameters`; publishes `sabr/sync/matched`. See the library
+//! documentation for the method.
+
+use anyhow::{bail, Context};
+use clap::Parser;
+use sabr_msgs::{
+    services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame,
+};
+use sabr_node::{monotonic_ns, Deadline, NodeRuntime};
+use sabr_sync::clock::ClockConfig;
+use sabr_sync::encoder_buffer::Pushed;
+use sabr_sync::latency::{self, LatencySetting, ParameterSet};
+use sabr_sync::matcher::{MatchStats, Matcher, MatcherConfig, Unmatched};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Command line of the sync process.
+#[derive(Debug, Parser)]
+#[command(name = "sabr-sync", about)]
+struct Args {
+    /// Tracker latency, ms: the frame clock line (a robust fit of arrival time against frame
+    /// counter) minus the exposure time. Replaced by the calibrated latency of a parameter
+    /// set (`--params`, or announced on sabr/calibrator/parameters) when it has one.
+    #[arg(long, value_name = "MS")]
+    latency_ms: Option<f64>,
+    /// A robot.toml or calibrated params.toml to start with: counts per revolution for the
+    /// encoder angles, and its calibrated latency if it has one [default: the nominal model].
+    #[arg(long, value_name = "FILE")]
+    params: Option<PathBuf>,
+    /// Encoder history kept for matching, s.
+    #[arg(long, value_name = "S", default_value_t = 3.0)]
+    buffer_s: f64,
+    /// Most tracker frames in the clock fit window.
+    #[arg(long, value_name = "N", default_value_t = 1200)]
+    window_frames: usize,
+    /// Publish only once the clock line's predicted uncertainty is at most this, µs.
+    #[arg(long, value_name = "US", default_value_t = 150.0)]
+    max_clock_uncertainty_us: f64,
+    /// Largest gap between the two encoder samples interpolated between, ms.
+    #[arg(long, value_name = "MS", default_value_t = 5.0)]
+    max_span_ms: f64,
+    /// Longest a frame waits for the encoder sample after its exposure, ms.
+    #[arg(long, value_name = "MS", default_value_t = 100.0)]
+    match_timeout_ms: f64,
+    /// Warn when the encoder or tracker stream is silent this long, ms.
+    #[arg(long, value_name = "MS", default_value_t = 500.0)]
+    stall_ms: f64,
+}
+
+/// Encoder samples per second assumed when sizing the buffer.
+const ENCODER_RATE_HZ: f64 = 1000.0;
+/// How often the counters are logged.
+const STATUS_PERIOD: Duration = Duration::from_secs(10);
+/// Longest sleep of the loop without data (retries waiting frames, checks deadlines).
+const IDLE: Duration = Duration::from_millis(10);
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(error) => {
+            tracing::error!("{error:#}");
+            eprintln!("sabr-sync: {error:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn positive_ms(name: &str, ms: f64) -> anyhow::Result<i64> {
+    if !(ms.is_finite() && ms > 0.0) {
+        bail!("--{name} must be a positive number of milliseconds, got {ms}");
+    }
+    Ok((ms * 1e6).round() as i64)
+}
+
+fn matcher_config(args: &Args) -> anyhow::Result<MatcherConfig> {
+    if !(args.buffer_s.is_finite() && args.buffer_s >= 2.0) {
+        bail!("--buffer-s must be at least 2 s, got {}", args.buffer_s);
+    }
+    if args.window_frames < 20 {
+        bail!("--window-frames must be at least 20, got {}", args.window_frames);
+    }
+    if !(args.max_clock_uncertainty_us.is_finite() && args.max_clock_uncertainty_us > 0.0) {
+        bail!(
+            "--max-clock-uncertainty-us must be positive, got {}",
+            args.max_clock_uncertainty_us
+        );
+    }
+    Ok(MatcherConfig {
+        clock: ClockConfig {
+            window: args.window_frames,
+            ..ClockConfig::default()
+        },
+        buffer_samples: (args.buffer_s * ENCODER_RATE_HZ).ceil() as usize,
+        max_span_ns: positive_ms("max-span-ms", args.max_span_ms)?,
+        match_timeout_ns: positive_ms("match-timeout-ms", args.match_timeout_ms)?,
+        max_uncertainty_ns: args.max_clock_uncertainty_us * 1e3,
+    })
+}
+
+fn run(args: &Args) -> anyhow::Result<()> {
+    let config = matcher_config(args)?;
+    let stall = Duration::from_nanos(positive_ms("stall-ms", args.stall_ms)? as u64);
+    let configured = args
+        .latency_ms
+        .map(latency::latency_ns)
+        .transpose()
+        .map_err(|reason| anyhow::anyhow!("--latency-ms: {reason}"))?;
+    let mut setting = LatencySetting::new(configured);
+    let initial = match &args.params {
+        Some(path) => Some(latency::read_parameter_set(path).context("--params")?),
+        None => None,
+    };
+    let counts_per_rev = initial.as_ref().map_or(
+        sabr_model::RobotParams::nominal().joints.counts_per_rev,
+        |set| set.params.joints.counts_per_rev,
+    );
+    if let Some(set) = &initial {
+        setting.apply(set);
+    }
+    let Some(latency) = setting.current() else {
+        bail!(
+            "no tracker latency: give --latency-ms, or --params with a calibrated \
+             `[calibration] latency_ms`"
+        );
+    };
+    let mut matcher = Matcher::new(config, counts_per_rev);
+
+    let mut rt = NodeRuntime::start("sync")?;
+    let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
+    let frames = rt.subscriber::<TrackerFrame>(services::TRACKER_FRAMES)?;
+    let announcements =
+        rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
+    let matched = rt.publisher::<MatchedSample>(services::SYNC_MATCHED)?;
+    tracing::info!(
+        latency_ms = latency.ns as f64 * 1e-6,
+        source = ?latency.source,
+        ?counts_per_rev,
+        window_frames = config.clock.window,
+        max_clock_uncertainty_us = args.max_clock_uncertainty_us,
+        "matching tracker frames to encoder samples"
+    );
+
+    let mut watch = Watch::new(stall);
+    rt.run_on_data(&[&encoders, &frames, &announcements], IDLE, |_ctx| {
+        announcements.drain(|a| {
+            if let Some(set) = load_announced(&a) {
+                matcher.set_counts_per_rev(set.params.joints.counts_per_rev);
+                if setting.apply(&set) {
+                    if let Some(now) = setting.current() {
+                        tracing::info!(
+                            latency_ms = now.ns as f64 * 1e-6,
+                            source = ?now.source,
+                            version = a.version,
+                            file = %set.path.display(),
+                            "using the calibrated tracker latency"
+                        );
+                    }
+                }
+            }
+        })?;
+        encoders.drain(|sample| {
+            watch.encoders.feed();
+            match matcher.push_encoder(sample) {
+                Pushed::AfterGap { lost } => tracing::warn!(
+                    lost,
+                    seq = sample.seq,
+                    "encoder samples lost (sequence gap)"
+                ),
+                Pushed::SequenceRestarted => {
+                    tracing::warn!(seq = sample.seq, "encoder sequence restarted")
+                }
+                Pushed::NotAfter { newest_ns } => tracing::warn!(
+                    t_ns = sample.t_ns,
+                    newest_ns,
+                    "encoder sample refused: its time stamp is not after the previous one"
+                ),
+                Pushed::InSequence => {}
+            }
+        })?;
+        let now = monotonic_ns();
+        frames.drain(|frame| {
+            watch.tracker.feed();
+            let result = matcher.push_frame(frame, setting.current(), now);
+            watch.frame_admitted(frame.frame_number, result);
+        })?;
+        let mut send = Ok(());
+        matcher.poll(monotonic_ns(), |result| match result {
+            Ok(sample) => {
+                if send.is_ok() {
+                    send = matched.send(sample);
+                }
+            }
+            Err((frame_number, reason)) => watch.frame_dropped(frame_number, reason),
+        });
+        send?;
+        watch.check(&matcher.stats());
+        Ok::<_, anyhow::Error>(())
+    })?;
+    let stats = matcher.stats();
+    tracing::info!(?stats, "sync stopped");
+    Ok(())
+}
+
+/// Reads an announced parameter file; a bad one is reported and ignored (the previous
+/// parameters stay in service).
+fn load_announced(announcement: &ParameterSetAnnouncement) -> Option<ParameterSet> {
+    let path = Path::new(announcement.path.as_str());
+    match latency::read_parameter_set(path) {
+        Ok(set) => {
+            tracing::info!(
+                version = announcement.version,
+                file = %path.display(),
+                calibrated_latency_ms = set.latency_ns.map(|ns| ns as f64 * 1e-6),
+                "parameter set announced"
+            );
+            Some(set)
+        }
+        Err(error) => {
+            tracing::error!(
+                version = announcement.version,
+                "announced parameter set rejected, keeping the previous one: {error}"
+            );
+            None
+        }
+    }
+}
+
+/// Stream deadlines, first-occurrence warnings and the periodic status line.
+struct Watch {
+    encoders: Deadline,
+    tracker: Deadline,
+    encoders_stalled: bool,
+    tracker_stalled: bool,
+    locked: bool,
+    warned_drop: bool,
+    last_status: Instant,
+    last_stats: MatchStats,
+}
+
+impl Watch {
+    fn new(stall: Duration) -> Self {
+        Self {
+            encoders: Deadline::new(stall),
+            tracker: Deadline::new(stall),
+            encoders_stalled: false,
+            tracker_stalled: false,
+            locked: false,
+            warned_drop: false,
+            last_status: Instant::now(),
+            last_stats: MatchStats::default(),
+        }
+    }
+
+    fn frame_admitted(&mut self, frame_number: u32, result: Result<(), Unmatched>) {
+        match result {
+            Ok(()) if !self.locked => {
+                self.locked = true;
+                tracing::info!(frame_number, "frame clock locked: publishing matched samples");
+            }
+            Ok(()) => {}
+            Err(Unmatched::Learning {
+                restart: Some(restart),
+                ..
+            }) => {
+                self.locked = false;
+                tracing::warn!(frame_number, "frame clock fit starts over: {restart}");
+            }
+            Err(Unmatched::NoLatency) => {
+                tracing::warn!(frame_number, "no tracker latency known: frame not matched")
+            }
+            Err(reason) => tracing::debug!(frame_number, ?reason, "frame not matched"),
+        }
+    }
+
+    fn frame_dropped(&mut self, frame_number: u32, reason: Unmatched) {
+        if self.warned_drop {
+            tracing::debug!(frame_number, ?reason, "frame not matched");
+        } else {
+            self.warned_drop = true;
+            tracing::warn!(
+                frame_number,
+                ?reason,
+                "frame not matched (further ones are counted in the status line)"
+            );
+        }
+    }
+
+    fn check(&mut self, stats: &MatchStats) {
+        for (deadline, stalled, stream) in [
+            (&self.encoders, &mut self.encoders_stalled, "encoder"),
+            (&self.tracker, &mut self.tracker_stalled, "tracker"),
+        ] {
+            if deadline.expired() && !*stalled {
+                *stalled = true;
+                tracing::warn!(
+                    silent_ms = deadline.silence().as_millis() as u64,
+                    "no {stream} data"
+                );
+            } else if !deadline.expired() && *stalled {
+                *stalled = false;
+                tracing::info!("{stream} data flowing again");
+            }
+        }
+        if self.last_status.elapsed() >= STATUS_PERIOD {
+            self.last_status = Instant::now();
+            let last = self.last_stats;
+            tracing::info!(
+                frames = stats.frames - last.frames,
+                matched = stats.matched - last.matched,
+                converging = stats.converging - last.converging,
+                timed_out = stats.timed_out - last.timed_out,
+                gaps = stats.gaps - last.gaps,
+                too_old = stats.too_old - last.too_old,
+                encoder_lost = stats.encoder_lost - last.encoder_lost,
+                "status (last {} s)",
+                STATUS_PERIOD.as_secs()
+            );
+            self.last_stats = *stats;
+        }
+    }
+}

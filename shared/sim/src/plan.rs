@@ -12,7 +12,7 @@ use crate::truth::{RobotTruth, TrueRobot};
 use crate::SimError;
 
 /// Peak amplitude of the excitation per joint (rad).
-pub const EXCITATION_AMPLITUDE: f64 = 0.18;
+pub const EXCITATION_AMPLITUDE: f64 = 0.2;
 /// Peak amplitude of the tip-phase motion per joint (rad).
 const TIP_AMPLITUDE: f64 = 0.12;
 /// Distance kept between the excitation envelope and the nominal stops (rad).
@@ -145,7 +145,7 @@ pub struct SessionPlan {
 }
 
 /// Centre of the excitation: each joint's ±[`EXCITATION_AMPLITUDE`] envelope ends
-/// [`STOP_MARGIN`] short of its nominal stop, on the stop's side of the home pose.
+/// 0.06 rad short of its nominal stop, on the stop's side of the home pose.
 pub fn excitation_centre(home_stops: &Joints, home: &Joints) -> Joints {
     std::array::from_fn(|i| {
         let side = (home_stops[i] - home[i]).signum();

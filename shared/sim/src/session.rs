@@ -214,9 +214,33 @@ impl Session {
         })
     }
 
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
     /// The true robot.
     pub fn robot_truth(&self) -> &RobotTruth {
         &self.robot
+    }
+
+    /// The tracker's truth (pose `T_S_M`, latency, clock).
+    pub fn tracker_truth(&self) -> &TrackerTruth {
+        &self.tracker
+    }
+
+    /// The true robot at power-up, ready to take motor setpoints (e.g. from a live rig).
+    pub fn true_robot(&self) -> TrueRobot {
+        TrueRobot::new(self.robot.clone())
+    }
+
+    /// The encoder sampling clock of this session, first nominal sample at power-up.
+    pub fn encoder_clock(&self) -> EncoderClock {
+        EncoderClock::new(
+            self.config.encoder.clone(),
+            0,
+            stream(self.config.seed, Stream::Encoder),
+        )
     }
 
     /// The commanded plan.
@@ -244,18 +268,9 @@ impl Session {
     /// samples, tracker exposures and validation instants, and records everything.
     pub fn record(&self) -> Result<(Recording, Truth), SimError> {
         let host = self.host_start_ns;
-        let mut robot = TrueRobot::new(self.robot.clone());
-        let mut encoder = EncoderClock::new(
-            self.config.encoder.clone(),
-            0,
-            stream(self.config.seed, Stream::Encoder),
-        );
-        let mut tracker = TrackerEmulator::new(
-            self.config.tracker.clone(),
-            self.tracker.clone(),
-            self.robot.params.markers.base_to_robot,
-            stream(self.config.seed, Stream::Tracker),
-        );
+        let mut robot = self.true_robot();
+        let mut encoder = self.encoder_clock();
+        let mut tracker = self.tracker_emulator();
         let end_ns = self.plan.end_ns();
         let windows = self.plan.validation();
         let mut next_window = 0;

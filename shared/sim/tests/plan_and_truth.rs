@@ -99,7 +99,7 @@ fn excitation_moves_every_joint_about_0_2_rad_and_validation_poses_spread_out() 
     for i in 0..5 {
         let half_range = 0.5 * (high[i] - low[i]);
         assert!(
-            (0.12..=0.2).contains(&half_range),
+            (0.14..=0.2).contains(&half_range),
             "joint {}: ±{half_range}",
             i + 1
         );

@@ -1,0 +1,33 @@
+//! The IK server of the SABR graph and its client.
+//!
+//! - [`IkSolver`]: answers an [`IkRequest`] (needle tip and direction in `Bb`, mm) with the
+//!   joints (rad) and motor counts of the loaded [`ParameterSet`], using the same library calls
+//!   as `sabr ik` (`sabr_model::inverse`, then `RobotParams::counts_from_joints` at rest).
+//!   NaN, infinite, degenerate and unreachable targets get an error status and a reason, never
+//!   a guess.
+//! - [`server::serve`]: the event-driven server loop of the `sabr-ik` process on
+//!   [`services::IK_SOLVE`]; it reloads the parameters when the calibrator announces a new set
+//!   on [`services::CALIBRATOR_PARAMETERS`] and keeps the previous set when the new file is
+//!   corrupt.
+//! - [`IkClient`]: sends a request, wakes the server and waits for the answer.
+//!
+//! ## Wake-up convention
+//!
+//! iceoryx2 request-response has no wake-up of its own, so a client wakes the sleeping server
+//! through the event service of the same name: after sending a request it notifies
+//! `NodeRuntime::notifier(services::IK_SOLVE)`. [`IkClient`] does this; a hand-made client
+//! (`NodeRuntime::client::<IkRequest, IkResponse>(services::IK_SOLVE)`) must do it too, or its
+//! request waits for the server's next periodic poll ([`server::POLL_PERIOD`]).
+//!
+//! [`IkRequest`]: sabr_msgs::IkRequest
+//! [`services::IK_SOLVE`]: sabr_msgs::services::IK_SOLVE
+//! [`services::CALIBRATOR_PARAMETERS`]: sabr_msgs::services::CALIBRATOR_PARAMETERS
+
+mod client;
+mod params_file;
+pub mod server;
+mod solver;
+
+pub use client::{IkClient, IkClientError};
+pub use params_file::{load_params, ParameterSet, ParamsFileError};
+pub use solver::{IkSolver, ReloadOutcome};

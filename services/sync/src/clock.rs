@@ -1,0 +1,517 @@
+//! The tracker's exposure clock, estimated online: a robust line through the tracker's frame
+//! counter and the host arrival stamps of the most recent frames.
+//!
+//! The line is the same one the calibrator fits offline (`sabr_calibrator::timesync::ClockFit`):
+//! the slope starts at the median per-tick interval (robust to skipped frames and counter
+//! increments ≠ 1), then iteratively reweighted least squares with a Huber loss on the MAD
+//! scale refine it (robust to jitter and to late frames, which only ever arrive late). The
+//! tracker latency is defined against this central line, so `exposure = line − latency` with
+//! either a configured or a calibrated latency. Here the fit runs over a sliding window and is
+//! evaluated at the newest frame, warm-started from the previous fit.
+
+use std::collections::VecDeque;
+
+/// Huber threshold in units of the robust scale (95 % efficiency for Gaussian jitter).
+const HUBER_K: f64 = 1.345;
+/// Most reweighting iterations per frame (the fit is warm-started, so a few suffice).
+const MAX_ITERATIONS: usize = 20;
+/// Iterations stop when the line moves less than this at both ends of the window (ns).
+const CONVERGED_NS: f64 = 0.5;
+/// Smallest robust scale used for the weights (ns), so noise-free input stays well defined.
+const MIN_SCALE_NS: f64 = 1.0;
+/// MAD to standard deviation for Gaussian data.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// Settings of the online clock fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockConfig {
+    /// Most frames in the fit window; the oldest leave first.
+    pub window: usize,
+    /// Fewest frames before a line is fitted (at least 3).
+    pub min_frames: usize,
+    /// A frame arriving further than this from where the line puts its counter (ns) means
+    /// the counter jumped (tracker restarted): the fit starts over from that frame.
+    pub restart_after_ns: i64,
+}
+
+impl Default for ClockConfig {
+    /// 60 s of a 20 Hz tracker, at least 10 frames, restart beyond 250 ms.
+    fn default() -> Self {
+        Self {
+            window: 1200,
+            min_frames: 10,
+            restart_after_ns: 250_000_000,
+        }
+    }
+}
+
+/// The clock line at one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockEstimate {
+    /// Host time of the arrival line at this frame's counter, ns; the exposure is this minus
+    /// the latency.
+    pub line_ns: i64,
+    /// This frame's arrival minus the line, ns (large and positive: a late frame).
+    pub residual_ns: i64,
+    /// Robust spread (1.4826 · MAD) of the arrivals about the line over the window, ns.
+    pub spread_ns: f64,
+    /// Standard uncertainty of `line_ns` predicted from the spread and the window, ns.
+    pub uncertainty_ns: f64,
+    /// Host time per frame-counter tick, ns.
+    pub period_ns: f64,
+    /// Frames in the fit window.
+    pub frames: usize,
+}
+
+/// Why the fit started over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Restart {
+    /// The frame counter went back (from, to).
+    CounterWentBack(u32, u32),
+    /// The counter advanced by `ticks`, which does not fit the time since the previous frame.
+    CounterJumped {
+        /// Counter increment.
+        ticks: u32,
+        /// Arrival minus where the line expected it, ns.
+        off_by_ns: i64,
+    },
+}
+
+impl std::fmt::Display for Restart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Restart::CounterWentBack(from, to) => {
+                write!(f, "the frame counter went back from {from} to {to}")
+            }
+            Restart::CounterJumped { ticks, off_by_ns } => write!(
+                f,
+                "the frame counter advanced by {ticks} but the frame arrived {:.1} ms off the \
+                 clock line",
+                *off_by_ns as f64 * 1e-6
+            ),
+        }
+    }
+}
+
+/// What one frame did to the clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Observed {
+    /// The frame's counter equals the previous one: the same frame again, ignored.
+    Repeated,
+    /// Too few frames for a line yet (after a start or a restart).
+    Learning {
+        /// Frames in the window so far.
+        frames: usize,
+        /// Set when this frame started the fit over.
+        restart: Option<Restart>,
+    },
+    /// The line at this frame.
+    Estimate(ClockEstimate),
+}
+
+/// One frame in the window: unwrapped counter and arrival stamp.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    tick: i64,
+    arrival_ns: i64,
+}
+
+/// A fitted line `arrival ≈ origin_ns + intercept + slope · (tick − origin_tick)`.
+#[derive(Debug, Clone, Copy)]
+struct Line {
+    origin_tick: i64,
+    origin_ns: i64,
+    intercept: f64,
+    slope: f64,
+}
+
+impl Line {
+    fn at(&self, tick: i64) -> f64 {
+        (self.origin_ns as f64) + self.intercept + self.slope * (tick - self.origin_tick) as f64
+    }
+}
+
+/// The online clock estimator; feed it every tracker frame in arrival order.
+#[derive(Debug, Clone)]
+pub struct FrameClock {
+    config: ClockConfig,
+    points: VecDeque<Point>,
+    last_counter: Option<u32>,
+    line: Option<Line>,
+    restarts: u64,
+}
+
+impl FrameClock {
+    /// An empty clock.
+    pub fn new(config: ClockConfig) -> Self {
+        Self {
+            config: ClockConfig {
+                min_frames: config.min_frames.max(3),
+                window: config.window.max(config.min_frames.max(3)),
+                ..config
+            },
+            points: VecDeque::new(),
+            last_counter: None,
+            line: None,
+            restarts: 0,
+        }
+    }
+
+    /// How often the fit started over because the counter went back or jumped.
+    pub fn restarts(&self) -> u64 {
+        self.restarts
+    }
+
+    /// Adds a frame (its counter and host arrival time, ns) and returns the line at it.
+    pub fn observe(&mut self, frame_number: u32, arrival_ns: i64) -> Observed {
+        let mut restart = None;
+        let tick = match (self.last_counter, self.points.back()) {
+            (Some(last), Some(previous)) => {
+                let step = frame_number.wrapping_sub(last);
+                if step == 0 {
+                    return Observed::Repeated;
+                }
+                if step > u32::MAX / 2 {
+                    restart = Some(Restart::CounterWentBack(last, frame_number));
+                    0
+                } else {
+                    let tick = previous.tick + i64::from(step);
+                    match self.expected_arrival(tick, previous) {
+                        Some(expected)
+                            if (arrival_ns as f64 - expected).abs()
+                                > self.config.restart_after_ns as f64 =>
+                        {
+                            restart = Some(Restart::CounterJumped {
+                                ticks: step,
+                                off_by_ns: (arrival_ns as f64 - expected) as i64,
+                            });
+                            0
+                        }
+                        _ => tick,
+                    }
+                }
+            }
+            _ => 0,
+        };
+        if restart.is_some() {
+            self.points.clear();
+            self.line = None;
+            self.restarts += 1;
+        }
+        self.last_counter = Some(frame_number);
+        self.points.push_back(Point { tick, arrival_ns });
+        while self.points.len() > self.config.window {
+            self.points.pop_front();
+        }
+        if self.points.len() < self.config.min_frames {
+            return Observed::Learning {
+                frames: self.points.len(),
+                restart,
+            };
+        }
+        Observed::Estimate(self.fit())
+    }
+
+    /// Where the current line (or, while learning, the median interval) puts `tick`.
+    fn expected_arrival(&self, tick: i64, previous: &Point) -> Option<f64> {
+        if let Some(line) = &self.line {
+            return Some(line.at(tick));
+        }
+        let mut slopes = consecutive_slopes(&self.points);
+        if slopes.is_empty() {
+            return None;
+        }
+        let slope = median(&mut slopes);
+        Some(previous.arrival_ns as f64 + slope * (tick - previous.tick) as f64)
+    }
+
+    /// Refits the line over the window and evaluates it at the newest frame.
+    fn fit(&mut self) -> ClockEstimate {
+        let newest = *self.points.back().expect("the window is not empty");
+        let x: Vec<f64> = self
+            .points
+            .iter()
+            .map(|p| (p.tick - newest.tick) as f64)
+            .collect();
+        let y: Vec<f64> = self
+            .points
+            .iter()
+            .map(|p| (p.arrival_ns - newest.arrival_ns) as f64)
+            .collect();
+        let (mut intercept, mut slope) = match &self.line {
+            // Warm start: the previous line moved to the new origin.
+            Some(line) => (line.at(newest.tick) - newest.arrival_ns as f64, line.slope),
+            None => initial_line(&x, &y),
+        };
+        let span = x.first().map_or(0.0, |first| -first);
+        let mut residuals = vec![0.0; x.len()];
+        let mut weights = vec![1.0; x.len()];
+        let mut scale = MIN_SCALE_NS;
+        for _ in 0..MAX_ITERATIONS {
+            for (r, (xi, yi)) in residuals.iter_mut().zip(x.iter().zip(&y)) {
+                *r = yi - intercept - slope * xi;
+            }
+            scale = robust_scale(&residuals).max(MIN_SCALE_NS);
+            for (w, r) in weights.iter_mut().zip(&residuals) {
+                *w = huber_weight(r / scale, HUBER_K);
+            }
+            let Some((new_intercept, new_slope)) = weighted_line(&x, &y, &weights) else {
+                break;
+            };
+            let moved = (new_intercept - intercept)
+                .abs()
+                .max((new_intercept - new_slope * span - (intercept - slope * span)).abs());
+            intercept = new_intercept;
+            slope = new_slope;
+            if moved < CONVERGED_NS {
+                break;
+            }
+        }
+        self.line = Some(Line {
+            origin_tick: newest.tick,
+            origin_ns: newest.arrival_ns,
+            intercept,
+            slope,
+        });
+        let line_ns = newest.arrival_ns as f64 + intercept;
+        ClockEstimate {
+            line_ns: line_ns.round() as i64,
+            residual_ns: (newest.arrival_ns as f64 - line_ns).round() as i64,
+            spread_ns: scale,
+            uncertainty_ns: scale * extrapolation_factor(&x),
+            period_ns: slope,
+            frames: x.len(),
+        }
+    }
+}
+
+/// Slopes (ns per tick) between consecutive frames of the window.
+fn consecutive_slopes(points: &VecDeque<Point>) -> Vec<f64> {
+    points
+        .iter()
+        .zip(points.iter().skip(1))
+        .filter(|(a, b)| b.tick > a.tick)
+        .map(|(a, b)| (b.arrival_ns - a.arrival_ns) as f64 / (b.tick - a.tick) as f64)
+        .collect()
+}
+
+/// The starting line: median per-tick interval, then the median offset.
+fn initial_line(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let mut slopes: Vec<f64> = x
+        .windows(2)
+        .zip(y.windows(2))
+        .filter(|(dx, _)| dx[1] > dx[0])
+        .map(|(dx, dy)| (dy[1] - dy[0]) / (dx[1] - dx[0]))
+        .collect();
+    let slope = median(&mut slopes);
+    let mut offsets: Vec<f64> = x.iter().zip(y).map(|(xi, yi)| yi - slope * xi).collect();
+    (median(&mut offsets), slope)
+}
+
+/// `sqrt(1/n + (x₀ − x̄)² / Sxx)` at `x₀ = 0`: the standard error of a least-squares line at
+/// the newest frame per unit of noise.
+fn extrapolation_factor(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let sxx: f64 = x.iter().map(|xi| (xi - mean).powi(2)).sum();
+    if sxx <= 0.0 {
+        return f64::INFINITY;
+    }
+    (1.0 / n + mean * mean / sxx).sqrt()
+}
+
+/// Huber weight of a standardised residual `u` with threshold `k`.
+fn huber_weight(u: f64, k: f64) -> f64 {
+    let a = u.abs();
+    if a <= k {
+        1.0
+    } else {
+        k / a
+    }
+}
+
+/// Median of `values` (reorders them); NaN when empty.
+fn median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let (_, upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let upper = *upper;
+    if n % 2 == 1 {
+        return upper;
+    }
+    let lower = values[..n / 2]
+        .iter()
+        .copied()
+        .max_by(f64::total_cmp)
+        .unwrap_or(upper);
+    0.5 * (lower + upper)
+}
+
+/// Robust standard deviation: 1.4826 · median absolute deviation from the median.
+fn robust_scale(values: &[f64]) -> f64 {
+    let mut work = values.to_vec();
+    let centre = median(&mut work);
+    for (w, v) in work.iter_mut().zip(values) {
+        *w = (v - centre).abs();
+    }
+    MAD_TO_SIGMA * median(&mut work)
+}
+
+/// Weighted least-squares line `y ≈ intercept + slope · x`; `None` if `x` does not vary.
+fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
+    let sw: f64 = w.iter().sum();
+    let mx = x.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let my = y.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for ((xi, yi), wi) in x.iter().zip(y).zip(w) {
+        sxy += wi * (xi - mx) * (yi - my);
+        sxx += wi * (xi - mx) * (xi - mx);
+    }
+    (sxx > 0.0).then(|| {
+        let slope = sxy / sxx;
+        (my - slope * mx, slope)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_streams::TrackerStream;
+    use rand::{Rng, SeedableRng};
+
+    /// Feeds `stream` and returns (frame index, estimate error vs. the true line, ns) for
+    /// every frame with an estimate.
+    fn errors(clock: &mut FrameClock, stream: &mut TrackerStream, frames: usize) -> Vec<f64> {
+        let mut out = Vec::new();
+        for _ in 0..frames {
+            let Some(frame) = stream.next_frame() else {
+                continue;
+            };
+            if let Observed::Estimate(estimate) = clock.observe(frame.counter, frame.arrival_ns)
+            {
+                let truth = frame.exposure_ns + stream.latency_ns;
+                out.push((estimate.line_ns - truth) as f64);
+            }
+        }
+        out
+    }
+
+    fn p99_abs(errors: &[f64]) -> f64 {
+        let mut a: Vec<f64> = errors.iter().map(|e| e.abs()).collect();
+        a.sort_by(f64::total_cmp);
+        a[((a.len() as f64 * 0.99) as usize).min(a.len() - 1)]
+    }
+
+    #[test]
+    fn exact_stream_gives_the_exact_line() {
+        let mut stream = TrackerStream::new(1, 50_000_000.0, 1, 30_000_000);
+        stream.jitter_ns = 0.0;
+        stream.late_probability = 0.0;
+        stream.drop_probability = 0.0;
+        let mut clock = FrameClock::new(ClockConfig::default());
+        let errors = errors(&mut clock, &mut stream, 100);
+        assert_eq!(errors.len(), 100 - 9);
+        assert!(errors.iter().all(|e| e.abs() <= 1.0), "{errors:?}");
+    }
+
+    #[test]
+    fn jitter_late_frames_drops_and_steps_of_3() {
+        // 1 ms Gaussian jitter, 2 % late frames (2–15 ms), 1 % dropped, counter +3 per frame,
+        // a tracker clock 40 ppm fast: the line at the newest frame stays well within 0.5 ms.
+        let mut stream = TrackerStream::new(7, 50_000_000.0 * (1.0 + 40e-6), 3, 42_000_000);
+        let mut clock = FrameClock::new(ClockConfig::default());
+        let errors = errors(&mut clock, &mut stream, 2400);
+        let settled = &errors[200..];
+        let p99 = p99_abs(settled);
+        assert!(p99 < 400_000.0, "p99 {p99} ns");
+        let mean = settled.iter().sum::<f64>() / settled.len() as f64;
+        assert!(mean.abs() < 60_000.0, "bias {mean} ns");
+        assert_eq!(clock.restarts(), 0);
+    }
+
+    #[test]
+    fn uncertainty_predicts_the_error() {
+        let mut stream = TrackerStream::new(11, 50_000_000.0, 1, 25_000_000);
+        stream.late_probability = 0.0;
+        let mut clock = FrameClock::new(ClockConfig::default());
+        let mut pairs = Vec::new();
+        for _ in 0..600 {
+            let Some(frame) = stream.next_frame() else {
+                continue;
+            };
+            if let Observed::Estimate(e) = clock.observe(frame.counter, frame.arrival_ns) {
+                let error = (e.line_ns - frame.exposure_ns - stream.latency_ns) as f64;
+                pairs.push((error, e.uncertainty_ns, e.spread_ns));
+            }
+        }
+        // Normalised errors over the last 300 frames: about unit variance.
+        let z: Vec<f64> = pairs[pairs.len() - 300..]
+            .iter()
+            .map(|(e, u, _)| e / u)
+            .collect();
+        let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+        assert!((0.3..2.0).contains(&rms), "normalised rms {rms}");
+        let spread = pairs.last().unwrap().2;
+        assert!((0.8e6..1.2e6).contains(&spread), "spread {spread} ns for 1 ms jitter");
+    }
+
+    #[test]
+    fn repeated_frames_are_ignored_and_a_counter_reset_restarts_the_fit() {
+        let mut clock = FrameClock::new(ClockConfig::default());
+        let mut t = 1_000_000_000i64;
+        for k in 0..20u32 {
+            t += 50_000_000;
+            clock.observe(500 + k, t);
+        }
+        assert_eq!(clock.observe(519, t + 1_000_000), Observed::Repeated);
+        t += 50_000_000;
+        match clock.observe(3, t) {
+            Observed::Learning {
+                frames: 1,
+                restart: Some(Restart::CounterWentBack(519, 3)),
+            } => {}
+            other => panic!("{other:?}"),
+        }
+        for k in 4..13u32 {
+            t += 50_000_000;
+            clock.observe(k, t);
+        }
+        // A jump forward that the elapsed time does not explain.
+        t += 50_000_000;
+        match clock.observe(10_000, t) {
+            Observed::Learning {
+                restart: Some(Restart::CounterJumped { ticks, .. }),
+                ..
+            } => assert_eq!(ticks, 10_000 - 12),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(clock.restarts(), 2);
+    }
+
+    #[test]
+    fn the_counter_wraps_around_without_a_restart() {
+        let mut clock = FrameClock::new(ClockConfig::default());
+        let mut counter = u32::MAX - 30;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut last = None;
+        for k in 0..60i64 {
+            counter = counter.wrapping_add(1);
+            let arrival = 2_000_000_000 + k * 50_000_000 + rng.random_range(0..100_000);
+            last = Some(clock.observe(counter, arrival));
+        }
+        assert_eq!(clock.restarts(), 0);
+        let Some(Observed::Estimate(e)) = last else {
+            panic!("{last:?}")
+        };
+        assert!((e.period_ns - 50_000_000.0).abs() < 5_000.0, "{}", e.period_ns);
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert!(median(&mut []).is_nan());
+    }
+}

@@ -1,0 +1,437 @@
+//! Pairs tracker frames with the encoder state at their exposure time.
+//!
+//! Each frame's exposure time is the frame clock line at its counter ([`crate::clock`]) minus
+//! the tracker latency; the encoder counts are interpolated there ([`crate::encoder_buffer`]).
+//! A frame waits until the first encoder sample after its exposure has arrived, at most
+//! [`MatcherConfig::match_timeout_ns`]. Frames are matched in arrival order.
+
+use crate::clock::{ClockConfig, ClockEstimate, FrameClock, Observed, Restart};
+use crate::encoder_buffer::{EncoderBuffer, Lookup, Pushed};
+use crate::latency::Latency;
+use sabr_msgs::{EncoderSample, MatchQuality, MatchedSample, TrackerFrame, JOINTS};
+use std::collections::VecDeque;
+use std::f64::consts::TAU;
+
+/// Settings of the matcher.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MatcherConfig {
+    /// The frame clock fit.
+    pub clock: ClockConfig,
+    /// Encoder samples kept (≥ 2 s at 1 kHz).
+    pub buffer_samples: usize,
+    /// Largest time between the two encoder samples interpolated between, ns.
+    pub max_span_ns: i64,
+    /// Longest a frame waits for the encoder sample after its exposure, ns of host time.
+    pub match_timeout_ns: i64,
+    /// Frames are published only once the clock line's predicted uncertainty is at most
+    /// this, ns (while the fit window fills after a start or restart).
+    pub max_uncertainty_ns: f64,
+}
+
+impl Default for MatcherConfig {
+    /// 3 s of 1 kHz samples, 5 ms span, 100 ms wait, 150 µs clock uncertainty.
+    fn default() -> Self {
+        Self {
+            clock: ClockConfig::default(),
+            buffer_samples: 3000,
+            max_span_ns: 5_000_000,
+            match_timeout_ns: 100_000_000,
+            max_uncertainty_ns: 150_000.0,
+        }
+    }
+}
+
+/// Why a frame was not matched.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Unmatched {
+    /// The frame counter repeated the previous frame's: the same frame again.
+    Repeated,
+    /// The clock fit has too few frames yet.
+    Learning {
+        /// Frames in the window.
+        frames: usize,
+        /// Set when this frame restarted the fit.
+        restart: Option<Restart>,
+    },
+    /// The clock line is not yet known precisely enough.
+    Converging {
+        /// Predicted uncertainty of the line, ns.
+        uncertainty_ns: f64,
+        /// Frames in the window.
+        frames: usize,
+    },
+    /// Neither a configured nor a calibrated latency is known.
+    NoLatency,
+    /// The exposure time lies before the oldest encoder sample kept.
+    TooOld,
+    /// The encoder samples around the exposure time are too far apart, ns.
+    Gap {
+        /// Time between them, ns.
+        span_ns: i64,
+    },
+    /// No encoder sample after the exposure arrived in time.
+    TimedOut,
+}
+
+/// Counters of what happened to the frames.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MatchStats {
+    /// Tracker frames received.
+    pub frames: u64,
+    /// Frames matched and published.
+    pub matched: u64,
+    /// Frames repeating the previous frame counter.
+    pub repeated: u64,
+    /// Frames without a usable clock line yet (learning or converging).
+    pub converging: u64,
+    /// Frames without a latency.
+    pub no_latency: u64,
+    /// Frames whose exposure was older than the encoder buffer.
+    pub too_old: u64,
+    /// Frames inside a gap of the encoder stream.
+    pub gaps: u64,
+    /// Frames whose next encoder sample never came in time.
+    pub timed_out: u64,
+    /// Encoder samples lost (sequence gaps).
+    pub encoder_lost: u64,
+    /// Encoder samples refused (time stamp not after the previous one).
+    pub encoder_refused: u64,
+}
+
+/// A frame waiting for the encoder sample after its exposure.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    frame: TrackerFrame,
+    clock: ClockEstimate,
+    latency: Latency,
+    exposure_ns: i64,
+    received_ns: i64,
+}
+
+/// The matcher: feed it encoder samples and tracker frames, poll it for matched samples.
+#[derive(Debug, Clone)]
+pub struct Matcher {
+    config: MatcherConfig,
+    clock: FrameClock,
+    encoders: EncoderBuffer,
+    pending: VecDeque<Pending>,
+    counts_per_rev: [u32; JOINTS],
+    seq: u64,
+    stats: MatchStats,
+}
+
+impl Matcher {
+    /// A matcher converting counts to angles with `counts_per_rev` (4 × CPT per joint).
+    pub fn new(config: MatcherConfig, counts_per_rev: [u32; JOINTS]) -> Self {
+        Self {
+            config,
+            clock: FrameClock::new(config.clock),
+            encoders: EncoderBuffer::new(config.buffer_samples),
+            pending: VecDeque::new(),
+            counts_per_rev,
+            seq: 0,
+            stats: MatchStats::default(),
+        }
+    }
+
+    /// Changes the counts per revolution used for the encoder angles (a new parameter set).
+    pub fn set_counts_per_rev(&mut self, counts_per_rev: [u32; JOINTS]) {
+        self.counts_per_rev = counts_per_rev;
+    }
+
+    /// What happened so far.
+    pub fn stats(&self) -> MatchStats {
+        self.stats
+    }
+
+    /// Frames waiting for encoder data.
+    pub fn pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Adds an encoder sample (in arrival order).
+    pub fn push_encoder(&mut self, sample: EncoderSample) -> Pushed {
+        let pushed = self.encoders.push(sample);
+        match pushed {
+            Pushed::AfterGap { lost } => self.stats.encoder_lost += lost,
+            Pushed::NotAfter { .. } => self.stats.encoder_refused += 1,
+            Pushed::InSequence | Pushed::SequenceRestarted => {}
+        }
+        pushed
+    }
+
+    /// Adds a tracker frame received at host time `now_ns`, with the latency in use. On
+    /// `Ok` the frame waits for [`Matcher::poll`]; on `Err` it is not matched, for the reason
+    /// given.
+    pub fn push_frame(
+        &mut self,
+        frame: TrackerFrame,
+        latency: Option<Latency>,
+        now_ns: i64,
+    ) -> Result<(), Unmatched> {
+        self.stats.frames += 1;
+        let result = self.admit(frame, latency, now_ns);
+        match result {
+            Err(Unmatched::Repeated) => self.stats.repeated += 1,
+            Err(Unmatched::Learning { .. } | Unmatched::Converging { .. }) => {
+                self.stats.converging += 1
+            }
+            Err(Unmatched::NoLatency) => self.stats.no_latency += 1,
+            _ => {}
+        }
+        result
+    }
+
+    fn admit(
+        &mut self,
+        frame: TrackerFrame,
+        latency: Option<Latency>,
+        now_ns: i64,
+    ) -> Result<(), Unmatched> {
+        let clock = match self.clock.observe(frame.frame_number, frame.arrival_t_ns) {
+            Observed::Repeated => return Err(Unmatched::Repeated),
+            Observed::Learning { frames, restart } => {
+                return Err(Unmatched::Learning { frames, restart })
+            }
+            Observed::Estimate(estimate) => estimate,
+        };
+        if clock.uncertainty_ns > self.config.max_uncertainty_ns {
+            return Err(Unmatched::Converging {
+                uncertainty_ns: clock.uncertainty_ns,
+                frames: clock.frames,
+            });
+        }
+        let latency = latency.ok_or(Unmatched::NoLatency)?;
+        self.pending.push_back(Pending {
+            frame,
+            clock,
+            latency,
+            exposure_ns: clock.line_ns - latency.ns,
+            received_ns: now_ns,
+        });
+        Ok(())
+    }
+
+    /// Matches every waiting frame whose encoder data is complete, in order, at host time
+    /// `now_ns`; hands each result to `out` (a matched sample, or the frame's counter and
+    /// why it was given up).
+    pub fn poll(&mut self, now_ns: i64, mut out: impl FnMut(Result<MatchedSample, (u32, Unmatched)>)) {
+        while let Some(pending) = self.pending.front().copied() {
+            let result = match self.encoders.at(pending.exposure_ns, self.config.max_span_ns) {
+                Lookup::Found(found) => Ok(self.matched(&pending, found)),
+                Lookup::NotYet if now_ns - pending.received_ns <= self.config.match_timeout_ns => {
+                    return;
+                }
+                Lookup::NotYet => Err(Unmatched::TimedOut),
+                Lookup::TooOld => Err(Unmatched::TooOld),
+                Lookup::Gap { span_ns } => Err(Unmatched::Gap { span_ns }),
+            };
+            self.pending.pop_front();
+            match &result {
+                Ok(_) => self.stats.matched += 1,
+                Err(Unmatched::TimedOut) => self.stats.timed_out += 1,
+                Err(Unmatched::TooOld) => self.stats.too_old += 1,
+                Err(Unmatched::Gap { .. }) => self.stats.gaps += 1,
+                Err(_) => {}
+            }
+            out(result.map_err(|reason| (pending.frame.frame_number, reason)));
+        }
+    }
+
+    fn matched(&mut self, pending: &Pending, found: crate::encoder_buffer::Interpolated) -> MatchedSample {
+        self.seq += 1;
+        let cpr = self.counts_per_rev;
+        MatchedSample {
+            seq: self.seq,
+            exposure_t_ns: pending.exposure_ns,
+            arrival_t_ns: pending.frame.arrival_t_ns,
+            frame_number: pending.frame.frame_number,
+            counts: found.counts,
+            encoder_angle_rad: std::array::from_fn(|j| TAU * found.counts[j] / f64::from(cpr[j])),
+            tools: pending.frame.tools,
+            quality: MatchQuality {
+                interpolation_span_ns: found.span_ns,
+                nearest_sample_ns: found.nearest_ns,
+                latency_ns: pending.latency.ns,
+                latency_source: pending.latency.source,
+                clock_residual_ns: pending.clock.residual_ns,
+                clock_spread_ns: pending.clock.spread_ns.round() as i64,
+                clock_frames: pending.clock.frames as u32,
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_streams::{encoder_samples, true_counts, TrackerStream};
+    use sabr_msgs::LatencySource;
+
+    const LATENCY: Latency = Latency {
+        ns: 35_000_000,
+        source: LatencySource::Configured,
+    };
+
+    fn frame(counter: u32, arrival_ns: i64) -> TrackerFrame {
+        TrackerFrame {
+            seq: 0,
+            arrival_t_ns: arrival_ns,
+            frame_number: counter,
+            tools: Default::default(),
+        }
+    }
+
+    /// Runs a synthetic session: 1 kHz encoders, 20 Hz tracker with the given counter
+    /// increment; returns the matched samples with their true exposure times.
+    fn session(increment: u32, seconds: i64) -> (Vec<(MatchedSample, i64)>, MatchStats) {
+        let mut matcher = Matcher::new(MatcherConfig::default(), [2000, 2000, 4000, 2000, 2000]);
+        let encoders = encoder_samples(4_900_000_000, 1_000_000, (seconds * 1000) as usize + 200, 20_000);
+        let mut stream = TrackerStream::new(3, 50_000_000.0, increment, LATENCY.ns);
+        let mut frames = Vec::new();
+        while let Some(f) = stream.next_frame().or_else(|| stream.next_frame()) {
+            if f.arrival_ns > 4_900_000_000 + seconds * 1_000_000_000 {
+                break;
+            }
+            frames.push(f);
+        }
+        // Deliver both streams in host time order, polling as a node would.
+        let mut out = Vec::new();
+        let mut next_frame = 0;
+        for sample in encoders {
+            while next_frame < frames.len() && frames[next_frame].arrival_ns <= sample.t_ns {
+                let f = frames[next_frame];
+                let _ = matcher.push_frame(frame(f.counter, f.arrival_ns), Some(LATENCY), f.arrival_ns);
+                next_frame += 1;
+            }
+            matcher.push_encoder(sample);
+            matcher.poll(sample.t_ns, |r| {
+                let m = r.expect("matched");
+                let truth = frames.iter().find(|f| f.counter == m.frame_number).unwrap();
+                out.push((m, truth.exposure_ns));
+            });
+        }
+        (out, matcher.stats())
+    }
+
+    #[test]
+    fn matches_a_jittery_stream_with_drops_and_counter_steps_of_3() {
+        let (matched, stats) = session(3, 60);
+        assert!(matched.len() > 900, "{stats:?}");
+        assert_eq!(stats.matched as usize, matched.len());
+        assert_eq!(stats.timed_out + stats.gaps + stats.too_old, 0, "{stats:?}");
+        let mut errors: Vec<i64> = matched
+            .iter()
+            .map(|(m, truth)| (m.exposure_t_ns - truth).abs())
+            .collect();
+        errors.sort_unstable();
+        let p99 = errors[errors.len() * 99 / 100];
+        assert!(p99 <= 500_000, "exposure error p99 {p99} ns");
+        for (m, _) in &matched {
+            assert_eq!(m.quality.latency_ns, LATENCY.ns);
+            assert!(m.quality.interpolation_span_ns <= 1_040_000);
+            assert!(m.quality.clock_spread_ns > 500_000 && m.quality.clock_spread_ns < 1_500_000);
+            // The counts are those at the estimated exposure, within a count.
+            let expected = true_counts(m.exposure_t_ns);
+            assert!((m.counts[0] - expected[0]).abs() < 1.0);
+            assert!((m.encoder_angle_rad[0] - TAU * m.counts[0] / 2000.0).abs() < 1e-12);
+        }
+        let seqs: Vec<u64> = matched.iter().map(|(m, _)| m.seq).collect();
+        assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
+    }
+
+    #[test]
+    fn nothing_is_published_before_the_clock_converges() {
+        // With 1 ms of jitter the line needs ~180 frames for 150 µs of predicted uncertainty.
+        let (matched, stats) = session(1, 20);
+        let first = matched.first().expect("matched after convergence").0;
+        assert!(first.quality.clock_frames >= 100, "{first:?}");
+        assert!(stats.converging >= 99, "{stats:?}");
+        assert_eq!(stats.matched as usize, matched.len());
+    }
+
+    #[test]
+    fn a_frame_waits_for_the_sample_after_its_exposure_then_times_out() {
+        let config = MatcherConfig {
+            clock: ClockConfig {
+                min_frames: 3,
+                ..ClockConfig::default()
+            },
+            max_uncertainty_ns: f64::INFINITY,
+            ..MatcherConfig::default()
+        };
+        let mut matcher = Matcher::new(config, [2000; 5]);
+        let latency = Latency {
+            ns: 0,
+            source: LatencySource::Calibrated,
+        };
+        for k in 0..3 {
+            matcher.push_encoder(EncoderSample {
+                seq: k + 1,
+                t_ns: 1_000_000 * k as i64,
+                counts: [k as i64; 5],
+            });
+        }
+        for k in 0..3u32 {
+            let arrival = 1_000_000 + 50_000_000 * i64::from(k);
+            let _ = matcher.push_frame(frame(k, arrival), Some(latency), arrival);
+        }
+        // Frame 2's exposure (101 ms) is after the newest sample (2 ms): it waits.
+        let mut results = Vec::new();
+        matcher.poll(101_000_000, |r| results.push(r));
+        assert!(results.is_empty());
+        assert_eq!(matcher.pending(), 1);
+        matcher.poll(250_000_000, |r| results.push(r));
+        assert_eq!(results, vec![Err((2, Unmatched::TimedOut))]);
+        assert_eq!(matcher.stats().timed_out, 1);
+        // Without any latency nothing is queued.
+        assert_eq!(
+            matcher.push_frame(frame(3, 151_000_000), None, 0),
+            Err(Unmatched::NoLatency)
+        );
+    }
+
+    #[test]
+    fn lost_encoder_samples_are_counted_and_gaps_refused() {
+        let config = MatcherConfig {
+            clock: ClockConfig {
+                min_frames: 3,
+                ..ClockConfig::default()
+            },
+            max_uncertainty_ns: f64::INFINITY,
+            ..MatcherConfig::default()
+        };
+        let mut matcher = Matcher::new(config, [2000; 5]);
+        for (seq, t) in [(1u64, 0i64), (2, 1_000_000), (12, 11_000_000), (13, 12_000_000)] {
+            matcher.push_encoder(EncoderSample {
+                seq,
+                t_ns: t,
+                counts: [0; 5],
+            });
+        }
+        assert_eq!(matcher.stats().encoder_lost, 9);
+        let latency = Some(Latency {
+            ns: 40_000_000,
+            source: LatencySource::Configured,
+        });
+        let mut results = Vec::new();
+        // The first two frames only start the clock; the third's exposure is before the
+        // oldest sample.
+        for k in 0..6u32 {
+            let exposure = 500_000 + (i64::from(k) - 3) * 5_000_000;
+            let _ = matcher.push_frame(frame(k, exposure + 40_000_000), latency, 0);
+        }
+        matcher.poll(0, |r| results.push(r.map(|m| m.frame_number)));
+        assert_eq!(
+            results,
+            vec![
+                Err((2, Unmatched::TooOld)),
+                Ok(3),
+                Err((4, Unmatched::Gap { span_ns: 10_000_000 })),
+                Err((5, Unmatched::Gap { span_ns: 10_000_000 }))
+            ]
+        );
+        assert_eq!(matcher.stats().gaps, 2);
+        assert_eq!(matcher.stats().too_old, 1);
+    }
+}
