@@ -6,6 +6,7 @@ mod bench;
 mod calibrate_cmd;
 mod kinematics_cmd;
 mod sim_cmd;
+mod soak;
 
 use sabr::launcher;
 
@@ -31,6 +32,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Calibrate the robot from a recording: params.toml, report.json, report.html.
     Calibrate(calibrate_cmd::CalibrateArgs),
+    /// Soak: run the sensing graph for minutes; lost encoder samples, rates, memory, CPU.
+    Soak(soak::SoakArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -42,6 +45,7 @@ fn main() -> std::process::ExitCode {
         Command::Launch(args) => launcher::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Calibrate(args) => calibrate_cmd::run(&args),
+        Command::Soak(args) => soak::run(&args),
     };
     match result {
         Ok(code) => code,

@@ -47,7 +47,10 @@ fn quick_baselines_measure_every_transport_and_payload() {
     assert!(!stdout.contains("not available"), "{stdout}");
 
     let rows = csv_rows(&out.join("bench.csv"));
-    assert_eq!(rows[0], ["name", "unit", "count", "p50", "p90", "p99", "p999", "max"]);
+    assert_eq!(
+        rows[0],
+        ["name", "unit", "count", "p50", "p90", "p99", "p999", "max"]
+    );
     let mut expected_names = Vec::new();
     for transport in TRANSPORTS {
         for payload in PAYLOADS {
@@ -61,10 +64,16 @@ fn quick_baselines_measure_every_transport_and_payload() {
         assert_eq!(row[2], samples, "{row:?}");
         let values: Vec<u64> = row[3..].iter().map(|v| v.parse().unwrap()).collect();
         assert!(values[0] > 0, "a round trip of 0 ns: {row:?}");
-        assert!(values.windows(2).all(|w| w[0] <= w[1]), "percentiles not monotone: {row:?}");
+        assert!(
+            values.windows(2).all(|w| w[0] <= w[1]),
+            "percentiles not monotone: {row:?}"
+        );
         let hgrm = out.join(format!("{}.hgrm", row[0].replace('/', "_")));
         let text = std::fs::read_to_string(&hgrm).unwrap();
-        assert!(text.contains(&format!("Total count    = {:>12}]", SAMPLES)), "{text}");
+        assert!(
+            text.contains(&format!("Total count    = {:>12}]", SAMPLES)),
+            "{text}"
+        );
     }
 
     let idle = csv_rows(&out.join("idle-cpu.csv"));

@@ -101,6 +101,9 @@ mod tests {
         let cores = std::thread::available_parallelism().unwrap().get() as f64;
         assert!(share.cores > 0.0, "{share:?}");
         assert!(share.cores <= cores + share.resolution, "{share:?}");
-        assert!(share.resolution > 0.0 && share.resolution < 0.1, "{share:?}");
+        assert!(
+            share.resolution > 0.0 && share.resolution < 0.1,
+            "{share:?}"
+        );
     }
 }

@@ -45,7 +45,12 @@ pub struct IoxEnd<Out: Message, In: Message> {
 impl<Out: Message, In: Message> IoxEnd<Out, In> {
     /// Creates the node and ports in `domain`. The receiving ports are created before the
     /// sending ones, so a peer that sees this side's publisher (and notifier) may send.
-    pub fn open(domain: &Domain, outbound: &str, inbound: &str, wait: Wait) -> anyhow::Result<Self> {
+    pub fn open(
+        domain: &Domain,
+        outbound: &str,
+        inbound: &str,
+        wait: Wait,
+    ) -> anyhow::Result<Self> {
         let node = NodeBuilder::new()
             .config(&domain.iceoryx_config())
             .create::<ipc::Service>()

@@ -1,7 +1,7 @@
-//! A one-line description of the machine a bench ran on (cores, CPU model, memory).
+//! A one-line description of the machine a bench ran on (cores, CPU model, memory, load).
 
-/// `N cores, <model name>, <GiB> GiB RAM` from `/proc/cpuinfo` and `/proc/meminfo`; parts that
-/// cannot be read are shown as `unknown`.
+/// `N cores, <model name>, <GiB> GiB RAM, load average <L> (1 min)` from `/proc/cpuinfo`,
+/// `/proc/meminfo` and `/proc/loadavg`; parts that cannot be read are shown as `unknown`.
 pub fn describe() -> String {
     let cores = std::thread::available_parallelism().map_or(0, |n| n.get());
     let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
@@ -9,8 +9,12 @@ pub fn describe() -> String {
     let model = proc_value(&cpuinfo, "model name").unwrap_or("unknown CPU");
     let memory = proc_value(&meminfo, "MemTotal")
         .and_then(|v| v.trim_end_matches("kB").trim().parse::<f64>().ok())
-        .map_or("unknown".to_owned(), |kib| format!("{:.1}", kib / 1024.0 / 1024.0));
-    format!("{cores} cores, {model}, {memory} GiB RAM")
+        .map_or("unknown".to_owned(), |kib| {
+            format!("{:.1}", kib / 1024.0 / 1024.0)
+        });
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let load = load.split_whitespace().next().unwrap_or("unknown");
+    format!("{cores} cores, {model}, {memory} GiB RAM, load average {load} (1 min)")
 }
 
 /// The value of the first `key: value` line with `key` in a `/proc` text.

@@ -208,7 +208,10 @@ mod tests {
         assert_eq!(rows[0][..3], [1.0, 0.0, 1.0]);
         for pair in rows.windows(2) {
             assert!(pair[1][0] >= pair[0][0], "values not monotone: {pair:?}");
-            assert!(pair[1][1] > pair[0][1], "percentiles not increasing: {pair:?}");
+            assert!(
+                pair[1][1] > pair[0][1],
+                "percentiles not increasing: {pair:?}"
+            );
             assert!(pair[1][2] >= pair[0][2], "counts not monotone: {pair:?}");
         }
         // The 50 % row: value 500 reached by 500 values, 1/(1-0.5) = 2.
@@ -231,7 +234,10 @@ mod tests {
         let mut m = Measurement::new("a/b", "ns");
         m.record(1500).unwrap();
         let text = hgrm_text(&m.histogram, 1000.0);
-        assert!(text.contains("       1.500 1.000000000000          1\n"), "{text}");
+        assert!(
+            text.contains("       1.500 1.000000000000          1\n"),
+            "{text}"
+        );
         assert!(text.contains("#[Max     =        1.500, Total count    =            1]"));
     }
 
@@ -255,10 +261,7 @@ mod tests {
     fn hgrm_files_are_named_after_measurements() {
         let dir = tempfile::tempdir().unwrap();
         let paths = write_hgrm_files(dir.path(), &[uniform("iox2-event/encoder-sample")]).unwrap();
-        assert_eq!(
-            paths,
-            [dir.path().join("iox2-event_encoder-sample.hgrm")]
-        );
+        assert_eq!(paths, [dir.path().join("iox2-event_encoder-sample.hgrm")]);
         let text = std::fs::read_to_string(&paths[0]).unwrap();
         // Written in µs: the maximum 1000 ns is 1.000.
         assert!(text.contains("#[Max     =        1.000,"), "{text}");

@@ -1,6 +1,8 @@
 //! What the ping-pong baselines carry (the graph's own messages) and over what.
 
-use sabr_node::msgs::{EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame};
+use sabr_node::msgs::{
+    EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
+};
 
 /// The request → response message pair of a ping-pong, one per live-graph hop, so each hop is
 /// compared with a baseline carrying the same bytes.

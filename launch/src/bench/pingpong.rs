@@ -96,12 +96,7 @@ fn run_iox<Req: Message + Default, Resp: Message>(
 ) -> anyhow::Result<PingPong> {
     let (ping, pong) = service_names(transport, payload);
     let end = IoxEnd::<Req, Resp>::open(domain, &ping, &pong, wait_mode(transport)?)?;
-    let mut peer = PongProcess::spawn(
-        transport,
-        payload,
-        plan,
-        &["--domain", domain.as_str()],
-    )?;
+    let mut peer = PongProcess::spawn(transport, payload, plan, &["--domain", domain.as_str()])?;
     let started = Instant::now();
     while !end.peer_ready() {
         peer.check_running()?;
@@ -154,13 +149,13 @@ fn measure(
     let mut round_trips = Measurement::new(name.clone(), "ns");
     for index in 0..plan.samples {
         let start = Instant::now();
-        round_trip(start + PEER_TIMEOUT)
-            .with_context(|| format!("{name}: round trip {index}"))?;
+        round_trip(start + PEER_TIMEOUT).with_context(|| format!("{name}: round trip {index}"))?;
         round_trips.record_duration(start.elapsed())?;
     }
     let pong_idle = measure_cpu_share(peer.pid(), plan.idle_window)
         .with_context(|| format!("{name}: idle CPU of the pong process"))?;
-    round_trip(Instant::now() + PEER_TIMEOUT).with_context(|| format!("{name}: last round trip"))?;
+    round_trip(Instant::now() + PEER_TIMEOUT)
+        .with_context(|| format!("{name}: last round trip"))?;
     peer.finish()?;
     Ok(PingPong {
         round_trips,
@@ -199,7 +194,11 @@ impl PongProcess {
 
     /// An error if the pong already exited.
     fn check_running(&mut self) -> anyhow::Result<()> {
-        match self.child.try_wait().context("cannot query the pong process")? {
+        match self
+            .child
+            .try_wait()
+            .context("cannot query the pong process")?
+        {
             None => Ok(()),
             Some(status) => bail!("the pong process exited early ({status})"),
         }
@@ -209,7 +208,11 @@ impl PongProcess {
     fn finish(mut self) -> anyhow::Result<()> {
         let started = Instant::now();
         loop {
-            if let Some(status) = self.child.try_wait().context("cannot query the pong process")? {
+            if let Some(status) = self
+                .child
+                .try_wait()
+                .context("cannot query the pong process")?
+            {
                 if status.success() {
                     return Ok(());
                 }

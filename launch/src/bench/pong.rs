@@ -2,8 +2,8 @@
 //! measuring `sabr bench` process, answers a fixed number of messages and exits.
 
 use super::iox::IoxEnd;
-use super::pingpong::{service_names, wait_mode, PEER_TIMEOUT};
 use super::payload::{Payload, Transport};
+use super::pingpong::{service_names, wait_mode, PEER_TIMEOUT};
 use super::uds::UdsEnd;
 use anyhow::Context;
 use sabr_node::msgs::{

@@ -54,7 +54,10 @@ impl SocketFile {
                 Err(error) if error.kind() == ErrorKind::WouldBlock => {
                     alive()?;
                     if Instant::now() >= deadline {
-                        bail!("the peer did not connect to {} in {timeout:?}", self.path.display());
+                        bail!(
+                            "the peer did not connect to {} in {timeout:?}",
+                            self.path.display()
+                        );
                     }
                     std::thread::sleep(ACCEPT_POLL);
                 }

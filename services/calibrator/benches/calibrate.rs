@@ -17,7 +17,10 @@ use sabr_sim::{record_session, write_session, SimConfig};
 const CHILD_FLAG: &str = "--child-calibrate";
 
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).filter(|a| a != "--bench").collect();
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
     if args.first().map(String::as_str) == Some(CHILD_FLAG) {
         return child(Path::new(&args[1]), Path::new(&args[2]));
     }
@@ -32,16 +35,26 @@ fn main() -> anyhow::Result<()> {
     for run in 0..runs {
         let out = work.path().join(format!("out{run}"));
         let output = Command::new(std::env::current_exe()?)
-            .args([CHILD_FLAG, &recording_dir.display().to_string(), &out.display().to_string()])
+            .args([
+                CHILD_FLAG,
+                &recording_dir.display().to_string(),
+                &out.display().to_string(),
+            ])
             .output()?;
-        anyhow::ensure!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        anyhow::ensure!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
         let text = String::from_utf8(output.stdout)?;
         let mut fields = text.split_whitespace();
         walls.push(fields.next().unwrap_or_default().parse::<f64>()?);
         peaks.push(fields.next().unwrap_or_default().parse::<f64>()?);
     }
     walls.sort_by(f64::total_cmp);
-    let params = RobotParams::from_toml_str(&std::fs::read_to_string(work.path().join("out0/params.toml"))?)?;
+    let params = RobotParams::from_toml_str(&std::fs::read_to_string(
+        work.path().join("out0/params.toml"),
+    )?)?;
     let errors: Vec<f64> = truth
         .validation
         .iter()

@@ -6,7 +6,10 @@ use sabr_calibrator::{calibrate, CalibrationOptions};
 use sabr_sim::{record_session, SimConfig};
 
 fn main() -> anyhow::Result<()> {
-    tracing_subscriber::fmt().with_env_filter(tracing_subscriber::EnvFilter::from_default_env()).with_writer(std::io::stderr).init();
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_writer(std::io::stderr)
+        .init();
     let mut args = std::env::args().skip(1);
     let seed: u64 = args.next().map_or(Ok(1), |s| s.parse())?;
     let scale: f64 = args.next().map_or(Ok(1.0), |s| s.parse())?;
@@ -16,9 +19,17 @@ fn main() -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let calibration = calibrate(&recording, &CalibrationOptions::default())?;
     println!("calibrated in {:.2} s", started.elapsed().as_secs_f64());
-    println!("{}", serde_json::to_string_pretty(&calibration.report.residual_rms)?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&calibration.report.residual_rms)?
+    );
     println!("validation {:?}", calibration.report.validation.tip_error);
-    println!("latency {:.3} ms, truth {:.3} ms, model-free {:.3}", calibration.report.latency_ms, truth.tracker.latency_ms(), calibration.report.time_sync.model_free_latency_ms);
+    println!(
+        "latency {:.3} ms, truth {:.3} ms, model-free {:.3}",
+        calibration.report.latency_ms,
+        truth.tracker.latency_ms(),
+        calibration.report.time_sync.model_free_latency_ms
+    );
     let p = &calibration.params;
     let t = &truth.robot.params;
     for j in 0..5 {
@@ -26,7 +37,8 @@ fn main() -> anyhow::Result<()> {
             "GR{} rel err {:+.5}%  stepwise {:+.5}%",
             j + 1,
             (p.joints.gear_ratio[j] / t.joints.gear_ratio[j] - 1.0) * 100.0,
-            (calibration.stepwise.robot.joints.gear_ratio[j] / t.joints.gear_ratio[j] - 1.0) * 100.0
+            (calibration.stepwise.robot.joints.gear_ratio[j] / t.joints.gear_ratio[j] - 1.0)
+                * 100.0
         );
     }
     let mut errors = Vec::new();
@@ -50,11 +62,22 @@ fn main() -> anyhow::Result<()> {
         rms(&errors),
         errors.iter().copied().fold(0.0, f64::max)
     );
-    println!("ident rank {} cond {:.3e} fixed {:?}", calibration.report.identifiability.rank, calibration.report.identifiability.condition_number, calibration.report.identifiability.fixed);
+    println!(
+        "ident rank {} cond {:.3e} fixed {:?}",
+        calibration.report.identifiability.rank,
+        calibration.report.identifiability.condition_number,
+        calibration.report.identifiability.fixed
+    );
     println!("noise {:?}", calibration.report.noise.fitted);
     for row in &calibration.report.parameters {
-        println!("{:28} nom {:12.6} step {:12.6} joint {:12.6} ± {:?}", row.name, row.nominal, row.stepwise, row.joint, row.std_dev);
+        println!(
+            "{:28} nom {:12.6} step {:12.6} joint {:12.6} ± {:?}",
+            row.name, row.nominal, row.stepwise, row.joint, row.std_dev
+        );
     }
-    println!("truth mounts f {:?} b {:?} base {:?} l_n {}", t.markers.front_mount, t.markers.back_mount, t.geometry.front_base, t.geometry.l_n);
+    println!(
+        "truth mounts f {:?} b {:?} base {:?} l_n {}",
+        t.markers.front_mount, t.markers.back_mount, t.geometry.front_base, t.geometry.l_n
+    );
     Ok(())
 }

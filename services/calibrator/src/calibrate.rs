@@ -19,8 +19,8 @@ use crate::stats::median;
 use crate::stepwise::{stepwise, FitSets};
 use crate::timesync::{ClockFit, EncoderTrack};
 use crate::validation::{
-    cross_validated_tip, marker_tip_errors, predicted_tip_std, tip_sphere_error,
-    validation_holds, TipError,
+    cross_validated_tip, marker_tip_errors, predicted_tip_std, tip_sphere_error, validation_holds,
+    TipError,
 };
 use crate::{latency, CalibrationError};
 
@@ -82,10 +82,18 @@ pub struct HoldPrediction {
 const DWELL_RATE: f64 = 5.0;
 
 const REQUIRED_PHASES: [(Phase, &str, &str); 4] = [
-    (Phase::Homing, "homing", "its dwell at the stops gives the joint offsets"),
+    (
+        Phase::Homing,
+        "homing",
+        "its dwell at the stops gives the joint offsets",
+    ),
     (Phase::Excitation, "excitation", "it is the data of the fit"),
     (Phase::Tip, "tip", "the tip sphere gives the needle length"),
-    (Phase::Validation, "validation", "it is held out to validate the model"),
+    (
+        Phase::Validation,
+        "validation",
+        "it is held out to validate the model",
+    ),
 ];
 
 /// Calibrates the robot of `recording`.
@@ -94,8 +102,14 @@ pub fn calibrate(
     options: &CalibrationOptions,
 ) -> Result<Calibration, CalibrationError> {
     let started = Instant::now();
+    // Only the session's own data (not a later test with the new parameters): see
+    // `session_span`.
+    let recording = &crate::session_span::within_session(recording);
     let robot = RobotParams::from_toml_str(&recording.robot_toml).map_err(|source| {
-        CalibrationError::RobotToml { dir: recording.dir.clone(), source }
+        CalibrationError::RobotToml {
+            dir: recording.dir.clone(),
+            source,
+        }
     })?;
     let phases = PhaseTable::new(&recording.phases);
     for (phase, name, why) in REQUIRED_PHASES {
@@ -107,7 +121,10 @@ pub fn calibrate(
     let session = synchronise(recording, &robot, phases, options)?;
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "synchronised");
     let model_free = latency::estimate(&session)?;
-    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "model-free latency");
+    tracing::debug!(
+        elapsed_s = started.elapsed().as_secs_f64(),
+        "model-free latency"
+    );
     let matched = session.observations(model_free.latency_s);
     let by_phase = |phase: Phase| -> Vec<&Observation> {
         matched.items.iter().filter(|o| o.phase == phase).collect()
@@ -130,7 +147,10 @@ pub fn calibrate(
             .filter(|o| o.front.is_some() && o.back.is_some())
             .collect(),
         dwell: dwell.clone(),
-        tip: by_phase(Phase::Tip).into_iter().filter(|o| o.tip.is_some()).collect(),
+        tip: by_phase(Phase::Tip)
+            .into_iter()
+            .filter(|o| o.tip.is_some())
+            .collect(),
     };
     if sets.tip.len() < options.min_tip_readings {
         return Err(CalibrationError::InsufficientData {
@@ -145,9 +165,14 @@ pub fn calibrate(
     let dwell_noise = NoiseModel::from_static(&dwell).unwrap_or_else(NoiseModel::vicra_default);
     let nominal = nominal_model(&robot, &dwell, model_free.latency_s);
     let stepwise_model = stepwise(&nominal, &sets, &dwell_noise)?;
-    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "stepwise method");
+    tracing::debug!(
+        elapsed_s = started.elapsed().as_secs_f64(),
+        "stepwise method"
+    );
     let layout = ParamLayout::paper();
     let fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
+    let (fit, discovery) =
+        crate::residual_loop::discover(&session, fit, &dwell_noise, dwell.len())?;
 
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "joint fit");
     let validation_frames: Vec<Observation> =
@@ -166,17 +191,38 @@ pub fn calibrate(
         .filter(|o| o.phase == Phase::Validation)
         .collect();
     let final_holds = validation_holds(&final_validation);
-    let marker_tip = |model: &CalibModel, holds| TipError::of(&marker_tip_errors(model, holds, &fit.noise));
+    let marker_tip =
+        |model: &CalibModel, holds| TipError::of(&marker_tip_errors(model, holds, &fit.noise));
     let residual_rms = vec![
-        model_residuals("nominal", &nominal, &fitted_at_start, &validation_frames, marker_tip(&nominal, &holds)),
-        model_residuals("stepwise", &stepwise_model, &fitted_at_start, &validation_frames, marker_tip(&stepwise_model, &holds)),
-        model_residuals("joint", &fit.model, &fit.observations, &final_validation, marker_tip(&fit.model, &final_holds)),
+        model_residuals(
+            "nominal",
+            &nominal,
+            &fitted_at_start,
+            &validation_frames,
+            marker_tip(&nominal, &holds),
+        ),
+        model_residuals(
+            "stepwise",
+            &stepwise_model,
+            &fitted_at_start,
+            &validation_frames,
+            marker_tip(&stepwise_model, &holds),
+        ),
+        model_residuals(
+            "joint",
+            &fit.model,
+            &fit.observations,
+            &final_validation,
+            marker_tip(&fit.model, &final_holds),
+        ),
     ];
     let validation = validation_report(&fit, &final_holds);
     let predictions = final_holds
         .iter()
         .filter_map(|hold| {
-            let pose = crate::residuals::predict(&fit.model, &hold.observation).ok()?.pose;
+            let pose = crate::residuals::predict(&fit.model, &hold.observation)
+                .ok()?
+                .pose;
             Some(HoldPrediction {
                 counts: hold.observation.counts_at_latency(fit.model.latency_s),
                 tip: pose.tip.coords.into(),
@@ -210,6 +256,8 @@ pub fn calibrate(
         parameters: parameter_table(&layout, &nominal, &stepwise_model, &fit),
         identifiability: IdentifiabilityReport::new(&fit),
         validation,
+        effects: discovery.effects,
+        r#final: discovery.final_report,
         run_time_s: 0.0,
     };
     let mut params = fit.model.robot.clone();
@@ -275,8 +323,17 @@ pub fn synchronise(
     let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_ns).collect();
     let clock = ClockFit::fit(&counters, &arrivals)?;
     let ticks = crate::timesync::unwrap_counters(&counters)?;
-    let encoders = EncoderTrack::new(&recording.encoders, (options.max_encoder_gap_ms * 1e6) as i64)?;
-    Ok(SessionData { frames, ticks, clock, encoders, phases })
+    let encoders = EncoderTrack::new(
+        &recording.encoders,
+        (options.max_encoder_gap_ms * 1e6) as i64,
+    )?;
+    Ok(SessionData {
+        frames,
+        ticks,
+        clock,
+        encoders,
+        phases,
+    })
 }
 
 /// The longest run of consecutive homing frames at rest (same counts).
@@ -285,9 +342,13 @@ fn homing_dwell<'a>(homing: &[&'a Observation]) -> Vec<&'a Observation> {
     let mut run: Vec<&Observation> = Vec::new();
     for obs in homing {
         let at_rest = obs.count_rates.iter().all(|r| r.abs() < DWELL_RATE);
-        let same = run
-            .first()
-            .is_none_or(|first| first.counts.iter().zip(&obs.counts).all(|(a, b)| (a - b).abs() < 1.0));
+        let same = run.first().is_none_or(|first| {
+            first
+                .counts
+                .iter()
+                .zip(&obs.counts)
+                .all(|(a, b)| (a - b).abs() < 1.0)
+        });
         if !(at_rest && same) {
             if run.len() >= best.len() {
                 best = std::mem::take(&mut run);
@@ -334,8 +395,11 @@ fn validation_report(fit: &JointFit, holds: &[crate::validation::Hold]) -> Valid
         tip_error,
         cross_validated_tip: cross,
         tip_reading_noise_mm,
-        cross_validated_excess_mm: cross
-            .map(|c| (c.rms_mm.powi(2) - tip_reading_noise_mm.powi(2)).max(0.0).sqrt()),
+        cross_validated_excess_mm: cross.map(|c| {
+            (c.rms_mm.powi(2) - tip_reading_noise_mm.powi(2))
+                .max(0.0)
+                .sqrt()
+        }),
         predicted_tip_std: std,
         holds: holds.len(),
         method: format!(

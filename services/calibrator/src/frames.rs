@@ -102,7 +102,9 @@ fn raw_frame(rows: &[TrackerRow]) -> Result<RawFrame, CalibrationError> {
                 let rotation = se3::unit_quaternion(quaternion).ok_or_else(|| {
                     CalibrationError::BadTrackerRow {
                         frame: row.frame,
-                        reason: format!("{tool:?} quaternion {quaternion:?} is not a unit quaternion"),
+                        reason: format!(
+                            "{tool:?} quaternion {quaternion:?} is not a unit quaternion"
+                        ),
                     }
                 })?;
                 let position = finite_point(row.frame, position)?;
@@ -164,7 +166,12 @@ mod tests {
         let rows = vec![
             pose_row(7, Tool::Base, &t_s_m),
             pose_row(7, Tool::Front, &t_s_tf),
-            TrackerRow { t_ns: 1007, frame: 7, tool: Tool::Back, reading: ToolReading::Missing },
+            TrackerRow {
+                t_ns: 1007,
+                frame: 7,
+                tool: Tool::Back,
+                reading: ToolReading::Missing,
+            },
             pose_row(8, Tool::Front, &t_s_tf),
         ];
         let (frames, stats) = measured_frames(&rows, &t_m_bb).unwrap();
@@ -180,7 +187,11 @@ mod tests {
     #[test]
     fn a_non_unit_quaternion_is_an_error_naming_the_frame() {
         let mut row = pose_row(3, Tool::Base, &Isometry3::identity());
-        row.reading = ToolReading::Pose { quaternion: [0.5, 0.0, 0.0, 0.0], position: [0.0; 3], rms: 0.1 };
+        row.reading = ToolReading::Pose {
+            quaternion: [0.5, 0.0, 0.0, 0.0],
+            position: [0.0; 3],
+            rms: 0.1,
+        };
         let error = measured_frames(&[row], &Isometry3::identity()).unwrap_err();
         assert!(error.to_string().contains("frame 3"), "{error}");
     }

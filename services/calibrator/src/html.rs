@@ -7,7 +7,10 @@ use crate::validation::TipError;
 
 /// Escapes text for HTML.
 fn escape(text: &str) -> String {
-    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 fn number(value: f64) -> String {
@@ -91,8 +94,10 @@ pub fn render(report: &Report) -> String {
     for r in &report.residual_rms {
         residual_row(&mut out, r);
     }
-    out.push_str("</table>\n<h2>Parameters</h2><table><tr><th>parameter</th><th>unit</th>\
-        <th>nominal</th><th>stepwise</th><th>joint fit</th><th>std dev</th></tr>\n");
+    out.push_str(
+        "</table>\n<h2>Parameters</h2><table><tr><th>parameter</th><th>unit</th>\
+        <th>nominal</th><th>stepwise</th><th>joint fit</th><th>std dev</th></tr>\n",
+    );
     for p in &report.parameters {
         let _ = writeln!(
             out,
@@ -119,7 +124,12 @@ pub fn render(report: &Report) -> String {
         out.push_str("<p>No direction had to be fixed.</p>\n");
     }
     for f in &id.fixed {
-        let names: Vec<String> = f.direction.parameters.iter().map(|(n, c)| format!("{n} ({c:.2})")).collect();
+        let names: Vec<String> = f
+            .direction
+            .parameters
+            .iter()
+            .map(|(n, c)| format!("{n} ({c:.2})"))
+            .collect();
         let _ = writeln!(
             out,
             "<p>Fixed <code>{}</code> at {}: near-null direction involving {}.</p>",
@@ -129,7 +139,13 @@ pub fn render(report: &Report) -> String {
         );
     }
     for (a, b, rho) in &id.strong_correlations {
-        let _ = writeln!(out, "<p>Strong correlation {} ↔ {}: {:.3}</p>", escape(a), escape(b), rho);
+        let _ = writeln!(
+            out,
+            "<p>Strong correlation {} ↔ {}: {:.3}</p>",
+            escape(a),
+            escape(b),
+            rho
+        );
     }
     let t = &report.time_sync;
     let d = &report.data;
@@ -141,7 +157,7 @@ pub fn render(report: &Report) -> String {
          <tr><th>tracker frames / without base / without robot tools</th><td>{} / {} / {}</td></tr>\
          <tr><th>frames rejected for encoder gaps</th><td>{}</td></tr>\
          <tr><th>dwell / excitation / tip readings / validation frames / holds</th><td>{} / {} / {} / {} / {}</td></tr>\
-         <tr><th>down-weighted measurements</th><td>{}</td></tr></table></body></html>",
+         <tr><th>down-weighted measurements</th><td>{}</td></tr></table>",
         number(t.tracker_tick_ms),
         number(t.arrival_jitter_ms),
         number(t.model_free_latency_ms),
@@ -157,6 +173,8 @@ pub fn render(report: &Report) -> String {
         d.validation_holds,
         d.downweighted_measurements
     );
+    out.push_str(&crate::residual_loop::html::section(report));
+    out.push_str("</body></html>");
     out
 }
 

@@ -95,9 +95,11 @@ pub fn analyse(layout: &ParamLayout, jacobian: &DMatrix<f64>, residual: &DVector
     }
     let mut std_devs = Vec::with_capacity(n);
     for j in 0..n {
-        let in_null = near_null
-            .iter()
-            .any(|d| d.parameters.iter().any(|(name, _)| *name == layout.ids[j].name()));
+        let in_null = near_null.iter().any(|d| {
+            d.parameters
+                .iter()
+                .any(|(name, _)| *name == layout.ids[j].name())
+        });
         std_devs.push(if in_null {
             f64::INFINITY
         } else {
@@ -114,7 +116,11 @@ pub fn analyse(layout: &ParamLayout, jacobian: &DMatrix<f64>, residual: &DVector
     });
     Analysis {
         rank,
-        condition_number: if smallest > 0.0 { largest / smallest } else { f64::INFINITY },
+        condition_number: if smallest > 0.0 {
+            largest / smallest
+        } else {
+            f64::INFINITY
+        },
         singular_values,
         std_devs,
         correlation,
@@ -149,7 +155,13 @@ mod tests {
 
     #[test]
     fn a_duplicated_column_is_named_as_a_near_null_direction() {
-        let layout = ParamLayout { ids: vec![ParamId::GearRatio(0), ParamId::JointOffset(0), ParamId::NeedleLength] };
+        let layout = ParamLayout {
+            ids: vec![
+                ParamId::GearRatio(0),
+                ParamId::JointOffset(0),
+                ParamId::NeedleLength,
+            ],
+        };
         let jacobian = DMatrix::from_fn(50, 3, |i, j| {
             let t = i as f64 / 10.0;
             match j {
@@ -162,14 +174,23 @@ mod tests {
         let analysis = analyse(&layout, &jacobian, &residual);
         assert_eq!(analysis.rank, 2);
         assert_eq!(analysis.near_null.len(), 1);
-        let names: Vec<&str> = analysis.near_null[0].parameters.iter().map(|(n, _)| n.as_str()).collect();
-        assert!(names.contains(&"gear_ratio[1]") && names.contains(&"joint_offset[1]"), "{names:?}");
+        let names: Vec<&str> = analysis.near_null[0]
+            .parameters
+            .iter()
+            .map(|(n, _)| n.as_str())
+            .collect();
+        assert!(
+            names.contains(&"gear_ratio[1]") && names.contains(&"joint_offset[1]"),
+            "{names:?}"
+        );
         assert!(analysis.std_devs[2].is_finite() && analysis.std_devs[0].is_infinite());
     }
 
     #[test]
     fn std_dev_of_a_mean_matches_sigma_over_sqrt_n() {
-        let layout = ParamLayout { ids: vec![ParamId::NeedleLength] };
+        let layout = ParamLayout {
+            ids: vec![ParamId::NeedleLength],
+        };
         let jacobian = DMatrix::from_element(100, 1, 1.0);
         let residual = DVector::from_fn(100, |i, _| if i % 2 == 0 { 1.0 } else { -1.0 });
         let analysis = analyse(&layout, &jacobian, &residual);

@@ -113,7 +113,11 @@ pub fn robust_weights(blocks: &[Block], raws: &[Option<[f64; 6]>], noise: &Noise
             let mut white = [0.0; 6];
             noise.of(block.quantity).whiten(raw, dim, &mut white);
             let norm = white[..dim].iter().map(|v| v * v).sum::<f64>().sqrt();
-            let k = if block.quantity == Quantity::Tip { HUBER_POINT } else { HUBER_POSE };
+            let k = if block.quantity == Quantity::Tip {
+                HUBER_POINT
+            } else {
+                HUBER_POSE
+            };
             huber_weight(norm, k)
         })
         .collect()
@@ -146,7 +150,12 @@ pub fn joint_fit(
             weights: &weights,
         };
         let solution = solve(problem, &model, STAGE)?;
-        tracing::debug!(outer, evaluations = solution.evaluations, cost = solution.cost, "joint fit pass");
+        tracing::debug!(
+            outer,
+            evaluations = solution.evaluations,
+            cost = solution.cost,
+            "joint fit pass"
+        );
         model = solution.model;
         let rematched = (model.latency_s - matched_latency).abs() > LATENCY_REMATCH_S;
         if rematched {
@@ -214,7 +223,11 @@ pub fn joint_fit(
             let value = id.get(start);
             id.set(&mut model, value);
             layout = layout.without(id);
-            fixed.push(FixedParameter { name: id.name(), value, direction });
+            fixed.push(FixedParameter {
+                name: id.name(),
+                value,
+                direction,
+            });
         }
         let problem = Problem {
             layout: &layout,

@@ -73,12 +73,20 @@ pub fn estimate(data: &SessionData) -> Result<LatencyEstimate, CalibrationError>
             COARSE_TO * 1e3
         )));
     }
-    let fine = grid(coarse[best] - COARSE_STEP, coarse[best] + COARSE_STEP, FINE_STEP);
+    let fine = grid(
+        coarse[best] - COARSE_STEP,
+        coarse[best] + COARSE_STEP,
+        FINE_STEP,
+    );
     let fine_costs: Vec<f64> = fine.iter().map(|d| cost(*d)).collect();
     let k = argmin(&fine_costs).clamp(1, fine.len() - 2);
     let latency_s = fine[k] + parabola_vertex(&fine_costs[k - 1..=k + 1]) * FINE_STEP;
     let rms = (cost(latency_s) / (selected.len() * OUTPUTS) as f64).sqrt();
-    Ok(LatencyEstimate { latency_s, frames: selected.len(), rms })
+    Ok(LatencyEstimate {
+        latency_s,
+        frames: selected.len(),
+        rms,
+    })
 }
 
 fn grid(from: f64, to: f64, step: f64) -> Vec<f64> {
@@ -107,7 +115,10 @@ pub fn parabola_vertex(y: &[f64]) -> f64 {
 /// Centred marker outputs (mm, rotations scaled to mm) of the selected frames.
 fn marker_outputs(data: &SessionData, selected: &[usize]) -> DMatrix<f64> {
     let first = &data.frames[selected[0]];
-    let (front_ref, back_ref) = (first.front.unwrap_or_default(), first.back.unwrap_or_default());
+    let (front_ref, back_ref) = (
+        first.front.unwrap_or_default(),
+        first.back.unwrap_or_default(),
+    );
     let mut y = DMatrix::zeros(selected.len(), OUTPUTS);
     for (row, &i) in selected.iter().enumerate() {
         let frame = &data.frames[i];
@@ -117,7 +128,8 @@ fn marker_outputs(data: &SessionData, selected: &[usize]) -> DMatrix<f64> {
         {
             let pose = pose.unwrap_or_default();
             let rotation: Vector3<f64> =
-                se3::rotation_log(&(pose.rotation * reference.rotation.inverse())) * ROTATION_WEIGHT_MM;
+                se3::rotation_log(&(pose.rotation * reference.rotation.inverse()))
+                    * ROTATION_WEIGHT_MM;
             for a in 0..3 {
                 y[(row, 6 * tool + a)] = pose.translation.vector[a];
                 y[(row, 6 * tool + 3 + a)] = rotation[a];

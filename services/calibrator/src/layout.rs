@@ -10,6 +10,7 @@
 use nalgebra::{DVector, Isometry3, Vector3};
 use sabr_model::RobotParams;
 
+use crate::residual_loop::EffectParam;
 use crate::se3;
 
 /// The model being calibrated: the robot parameters plus the tracker latency.
@@ -26,8 +27,13 @@ pub struct CalibModel {
 pub enum Channel {
     /// Only through the joint angles computed from the counts.
     JointMap,
-    /// Through the kinematic geometry (needs forward kinematics).
+    /// Through the kinematic geometry in general (needs forward kinematics).
     Geometry,
+    /// Through `T_Bb_Bf`: the front effector moves rigidly with it (no FK needed for the
+    /// marker poses), the needle needs FK.
+    FrontBase,
+    /// Through the needle length: only the tip moves, along `z_N`.
+    NeedleLength,
     /// Only through a marker mounting (composed after forward kinematics).
     Mount,
 }
@@ -55,6 +61,8 @@ pub enum ParamId {
     BackMountTranslation(usize),
     /// Rotation-vector component of `T_Eb_Tb` (rad).
     BackMountRotation(usize),
+    /// A numeric parameter of one of the model's effects (see `residual_loop`).
+    Effect(EffectParam),
 }
 
 const AXES: [&str; 3] = ["x", "y", "z"];
@@ -73,6 +81,7 @@ impl ParamId {
             ParamId::FrontMountRotation(a) => format!("front_mount.rotation.{}", AXES[a]),
             ParamId::BackMountTranslation(a) => format!("back_mount.translation.{}", AXES[a]),
             ParamId::BackMountRotation(a) => format!("back_mount.rotation.{}", AXES[a]),
+            ParamId::Effect(p) => p.name(),
         }
     }
 
@@ -80,6 +89,7 @@ impl ParamId {
     pub fn unit(&self) -> &'static str {
         match self {
             ParamId::Latency => "s",
+            ParamId::Effect(p) => p.unit(),
             ParamId::GearRatio(_) => "1",
             ParamId::JointOffset(_)
             | ParamId::FrontBaseRotation(_)
@@ -92,12 +102,10 @@ impl ParamId {
     /// How the parameter acts on a prediction.
     pub fn channel(&self) -> Channel {
         match self {
-            ParamId::Latency | ParamId::GearRatio(_) | ParamId::JointOffset(_) => {
-                Channel::JointMap
-            }
-            ParamId::FrontBaseTranslation(_)
-            | ParamId::FrontBaseRotation(_)
-            | ParamId::NeedleLength => Channel::Geometry,
+            ParamId::Latency | ParamId::GearRatio(_) | ParamId::JointOffset(_) => Channel::JointMap,
+            ParamId::FrontBaseTranslation(_) | ParamId::FrontBaseRotation(_) => Channel::FrontBase,
+            ParamId::NeedleLength => Channel::NeedleLength,
+            ParamId::Effect(p) => p.channel(),
             _ => Channel::Mount,
         }
     }
@@ -131,6 +139,7 @@ impl ParamId {
             ParamId::BackMountRotation(a) => {
                 se3::rotation_log(&robot.markers.back_mount.rotation)[a]
             }
+            ParamId::Effect(p) => p.get(&robot.effects),
         }
     }
 
@@ -149,11 +158,14 @@ impl ParamId {
             ParamId::FrontMountTranslation(a) => {
                 robot.markers.front_mount.translation.vector[a] = value;
             }
-            ParamId::FrontMountRotation(a) => set_rotation(&mut robot.markers.front_mount, a, value),
+            ParamId::FrontMountRotation(a) => {
+                set_rotation(&mut robot.markers.front_mount, a, value)
+            }
             ParamId::BackMountTranslation(a) => {
                 robot.markers.back_mount.translation.vector[a] = value;
             }
             ParamId::BackMountRotation(a) => set_rotation(&mut robot.markers.back_mount, a, value),
+            ParamId::Effect(p) => p.set(&mut robot.effects, value),
         }
     }
 }
@@ -224,7 +236,10 @@ mod tests {
 
     #[test]
     fn values_and_apply_round_trip_every_parameter() {
-        let mut model = CalibModel { robot: RobotParams::nominal(), latency_s: 0.03 };
+        let mut model = CalibModel {
+            robot: RobotParams::nominal(),
+            latency_s: 0.03,
+        };
         model.robot.joints.offset = Some([0.1, 0.2, 0.3, 0.4, 0.5]);
         let layout = ParamLayout::paper();
         assert_eq!(layout.len(), 29);

@@ -94,7 +94,6 @@ impl NoiseModel {
     }
 }
 
-
 /// Fewest static frames for a noise estimate.
 const MIN_STATIC_FRAMES: usize = 5;
 
@@ -117,17 +116,25 @@ impl NoiseModel {
                 .iter()
                 .map(|p| se3::rotation_log(&(p.rotation * mean.rotation.inverse())).norm_squared())
                 .collect();
-            let rotation_sigma = (rotations.iter().sum::<f64>() / (3.0 * (poses.len() - 1) as f64)).sqrt();
+            let rotation_sigma =
+                (rotations.iter().sum::<f64>() / (3.0 * (poses.len() - 1) as f64)).sqrt();
             Some(ToolNoise::new(se3::covariance(&positions)?, rotation_sigma))
         };
         let front = tool(both.iter().map(|(f, _)| *f).collect())?;
         let back = tool(both.iter().map(|(_, b)| *b).collect())?;
-        Some(Self { tip: front.clone(), front, back })
+        Some(Self {
+            tip: front.clone(),
+            front,
+            back,
+        })
     }
 
     /// Re-estimates each quantity's noise from raw residuals `(quantity, raw, weight)` (the
     /// weighted second moment); a quantity with fewer than 5 residuals keeps its noise.
-    pub fn from_residuals<'a>(&self, residuals: impl Iterator<Item = (Quantity, &'a [f64; 6], f64)>) -> Self {
+    pub fn from_residuals<'a>(
+        &self,
+        residuals: impl Iterator<Item = (Quantity, &'a [f64; 6], f64)>,
+    ) -> Self {
         let mut sums = [(Matrix3::zeros(), 0.0, 0.0, 0usize); 3];
         for (quantity, raw, weight) in residuals {
             let slot = &mut sums[quantity as usize];

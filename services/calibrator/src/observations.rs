@@ -10,8 +10,6 @@ use crate::timesync::{ClockFit, EncoderTrack};
 
 /// Half width (ns) of the central difference that gives the count rates.
 const RATE_HALF_WINDOW_NS: f64 = 25e6;
-/// Count rate (counts/s) above which a joint counts as moving for the motion direction.
-const MOVING_RATE: f64 = 40.0;
 
 /// The phases of the session plan the calibration knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
@@ -158,23 +156,20 @@ impl SessionData {
     /// Matches every frame to the encoders at latency `latency_s` (s).
     pub fn observations(&self, latency_s: f64) -> Observations {
         let mut out = Observations::default();
-        let mut motion = JointMotion::default();
         for (index, frame) in self.frames.iter().enumerate() {
             let exposure_ns = self.exposure_ns(index, latency_s);
             let matched = self.encoders.counts_at(exposure_ns).zip(
                 self.encoders
                     .rate_at(exposure_ns, RATE_HALF_WINDOW_NS)
-                    .or_else(|| self.encoders.rate_at(exposure_ns, RATE_HALF_WINDOW_NS / 5.0)),
+                    .or_else(|| {
+                        self.encoders
+                            .rate_at(exposure_ns, RATE_HALF_WINDOW_NS / 5.0)
+                    }),
             );
             let Some((counts, count_rates)) = matched else {
                 out.rejected_encoder_gap += 1;
                 continue;
             };
-            for (direction, rate) in motion.direction.iter_mut().zip(count_rates) {
-                if rate.abs() > MOVING_RATE {
-                    *direction = rate.signum();
-                }
-            }
             out.items.push(Observation {
                 frame: frame.frame,
                 exposure_ns,
@@ -182,7 +177,7 @@ impl SessionData {
                 phase: self.phases.at(exposure_ns),
                 counts,
                 count_rates,
-                motion,
+                motion: self.encoders.motion_at(exposure_ns),
                 front: frame.front,
                 back: frame.back,
                 tip: frame.tip,

@@ -21,10 +21,20 @@ pub struct OutputError {
 
 /// Writes `contents` to `path` atomically (temporary file + rename in the same directory).
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError> {
-    let error = |action| move |source| OutputError { path: path.to_path_buf(), action, source };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let error = |action| {
+        move |source| OutputError {
+            path: path.to_path_buf(),
+            action,
+            source,
+        }
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let temporary = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-    let mut file = std::fs::File::create(&temporary).map_err(error("create a temporary file for"))?;
+    let mut file =
+        std::fs::File::create(&temporary).map_err(error("create a temporary file for"))?;
     file.write_all(contents).map_err(error("write"))?;
     file.sync_all().map_err(error("sync"))?;
     drop(file);
@@ -57,14 +67,20 @@ pub fn write_outputs(calibration: &Calibration, dir: &Path) -> Result<(), Output
         action: "create the output directory",
         source,
     })?;
-    write_atomically(&dir.join("params.toml"), calibration.params.to_toml_string().as_bytes())?;
+    write_atomically(
+        &dir.join("params.toml"),
+        calibration.params.to_toml_string().as_bytes(),
+    )?;
     let json = serde_json::to_string_pretty(&calibration.report).map_err(|e| OutputError {
         path: dir.join("report.json"),
         action: "serialise",
         source: std::io::Error::other(e),
     })?;
     write_atomically(&dir.join("report.json"), json.as_bytes())?;
-    write_atomically(&dir.join("report.html"), html::render(&calibration.report).as_bytes())?;
+    write_atomically(
+        &dir.join("report.html"),
+        html::render(&calibration.report).as_bytes(),
+    )?;
     write_atomically(
         &dir.join("validation_predictions.csv"),
         predictions_csv(calibration).as_bytes(),

@@ -8,7 +8,7 @@ use sabr_model::Geometry;
 use crate::layout::{CalibModel, Channel, ParamLayout};
 use crate::observations::Observation;
 use crate::residuals::{
-    joint_angles, marker_poses, predict_at, raw_residual, Block, NoiseModel, Prediction,
+    joint_angles, marker_poses, predict_at, raw_residual, Block, NoiseModel, Prediction, Quantity,
 };
 use crate::CalibrationError;
 
@@ -41,11 +41,13 @@ impl Problem<'_> {
     /// The blocks of each observation, with the index of the first one.
     fn groups(&self) -> impl Iterator<Item = (usize, &[Block])> {
         let mut start = 0;
-        self.blocks.chunk_by(|a, b| a.obs == b.obs).map(move |group| {
-            let first = start;
-            start += group.len();
-            (first, group)
-        })
+        self.blocks
+            .chunk_by(|a, b| a.obs == b.obs)
+            .map(move |group| {
+                let first = start;
+                start += group.len();
+                (first, group)
+            })
     }
 
     /// Writes the whitened (unweighted) residuals of one observation's blocks into `out`
@@ -56,7 +58,9 @@ impl Problem<'_> {
             let obs = &self.observations[block.obs];
             let dim = block.quantity.dim();
             let raw = raw_residual(prediction, obs, block.quantity).unwrap_or([0.0; 6]);
-            self.noise.of(block.quantity).whiten(&raw, dim, &mut out[k..k + dim]);
+            self.noise
+                .of(block.quantity)
+                .whiten(&raw, dim, &mut out[k..k + dim]);
             k += dim;
         }
         k
@@ -92,7 +96,13 @@ impl Problem<'_> {
 
     /// Writes the rows of `local` (one observation, block order) to their stacked rows,
     /// scaled by the square root of each block's weight.
-    fn scatter(&self, first: usize, group: &[Block], local: &[f64], mut write: impl FnMut(usize, f64)) {
+    fn scatter(
+        &self,
+        first: usize,
+        group: &[Block],
+        local: &[f64],
+        mut write: impl FnMut(usize, f64),
+    ) {
         let mut k = 0;
         for (i, block) in group.iter().enumerate() {
             let scale = self.weights[first + i].sqrt();
@@ -118,9 +128,14 @@ impl Problem<'_> {
                 let step = id.step();
                 let mut shifted = model.clone();
                 id.set(&mut shifted, id.get(model) + step);
-                let geometry = (id.channel() == Channel::Geometry)
+                let geometry = matches!(id.channel(), Channel::Geometry | Channel::FrontBase)
                     .then(|| shifted.robot.effective_geometry());
-                Perturbed { channel: id.channel(), step, model: shifted, geometry }
+                Perturbed {
+                    channel: id.channel(),
+                    step,
+                    model: shifted,
+                    geometry,
+                }
             })
             .collect();
         let needs_dq = perturbed.iter().any(|p| p.channel == Channel::JointMap);
@@ -135,6 +150,7 @@ impl Problem<'_> {
                 continue;
             };
             let rows = self.observation_rows(&p0, group, &mut r0);
+            let sees_tip = group.iter().any(|b| b.quantity == Quantity::Tip);
             if needs_dq {
                 for (j, derivative) in dr_dq.iter_mut().enumerate() {
                     let mut q = q0;
@@ -165,10 +181,28 @@ impl Problem<'_> {
                     Channel::Mount => {
                         let (front_marker, back_marker) =
                             marker_poses(&p0.pose, &p.model.robot.markers);
-                        let shifted = Prediction { front_marker, back_marker, ..p0.clone() };
+                        let shifted = Prediction {
+                            front_marker,
+                            back_marker,
+                            ..p0.clone()
+                        };
                         self.finite_difference(&shifted, group, &r0, p.step, &mut column)
                     }
-                    Channel::Geometry => {
+                    Channel::NeedleLength => {
+                        let mut shifted = p0.clone();
+                        shifted.pose.tip += shifted.pose.direction.into_inner() * p.step;
+                        self.finite_difference(&shifted, group, &r0, p.step, &mut column)
+                    }
+                    Channel::FrontBase if !sees_tip => {
+                        let motion = p.model.robot.geometry.front_base
+                            * model.robot.geometry.front_base.inverse();
+                        let shifted = Prediction {
+                            front_marker: motion * p0.front_marker,
+                            ..p0.clone()
+                        };
+                        self.finite_difference(&shifted, group, &r0, p.step, &mut column)
+                    }
+                    Channel::Geometry | Channel::FrontBase => {
                         let geometry = p.geometry.as_ref().unwrap_or(&geometry);
                         match predict_at(geometry, &p.model.robot.markers, q0) {
                             Ok(shifted) => {
@@ -179,7 +213,9 @@ impl Problem<'_> {
                     }
                 };
                 if ok {
-                    self.scatter(first, group, &column, |row, value| jacobian[(row, col)] = value);
+                    self.scatter(first, group, &column, |row, value| {
+                        jacobian[(row, col)] = value
+                    });
                 }
             }
         }
@@ -259,7 +295,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for LmAdapter<'_> {
 
 /// Minimises the problem's cost with Levenberg–Marquardt from `start`. Errors when the
 /// solver reports a numerical failure or the kinematics fail at the solution.
-pub fn solve(problem: Problem<'_>, start: &CalibModel, stage: &'static str) -> Result<Solution, CalibrationError> {
+pub fn solve(
+    problem: Problem<'_>,
+    start: &CalibModel,
+    stage: &'static str,
+) -> Result<Solution, CalibrationError> {
     let adapter = LmAdapter {
         problem,
         template: start.clone(),
@@ -319,29 +359,55 @@ pub(crate) mod tests {
     pub(crate) fn synthetic(count: usize) -> (CalibModel, CalibModel, Vec<Observation>) {
         let mut nominal = RobotParams::nominal();
         nominal.joints.offset = Some(HOME);
-        let start = CalibModel { robot: nominal, latency_s: 0.0 };
+        let start = CalibModel {
+            robot: nominal,
+            latency_s: 0.0,
+        };
         let mut truth = start.clone();
         let robot = &mut truth.robot;
         robot.joints.gear_ratio = [0.101, 0.0985, 0.0504, 0.1012, 0.0991];
-        robot.joints.offset = Some([HOME[0] + 0.01, HOME[1] - 0.02, 0.015, HOME[3] + 0.012, HOME[4] - 0.008]);
-        robot.geometry.front_base = se3::isometry(Vector3::new(0.8, -0.5, 100.9), Vector3::new(0.006, -0.004, 0.0));
+        robot.joints.offset = Some([
+            HOME[0] + 0.01,
+            HOME[1] - 0.02,
+            0.015,
+            HOME[3] + 0.012,
+            HOME[4] - 0.008,
+        ]);
+        robot.geometry.front_base = se3::isometry(
+            Vector3::new(0.8, -0.5, 100.9),
+            Vector3::new(0.006, -0.004, 0.0),
+        );
         robot.geometry.l_n = 181.7;
-        robot.markers.front_mount = se3::isometry(Vector3::new(0.6, -0.4, 15.8), Vector3::new(0.02, -0.01, 0.03));
-        robot.markers.back_mount = se3::isometry(Vector3::new(-0.7, 0.3, -14.4), Vector3::new(-0.015, 0.02, -0.01));
+        robot.markers.front_mount = se3::isometry(
+            Vector3::new(0.6, -0.4, 15.8),
+            Vector3::new(0.02, -0.01, 0.03),
+        );
+        robot.markers.back_mount = se3::isometry(
+            Vector3::new(-0.7, 0.3, -14.4),
+            Vector3::new(-0.015, 0.02, -0.01),
+        );
         let offset = truth.robot.joints.offset.unwrap();
         let observations = (0..count)
             .map(|k| {
                 let t = k as f64 * 0.37;
                 let q: [f64; 5] = std::array::from_fn(|j| {
-                    HOME[j] + 0.12 * (t * (1.0 + 0.31 * j as f64)).sin() * if j == 2 { 0.8 } else { 1.0 }
+                    HOME[j]
+                        + 0.12
+                            * (t * (1.0 + 0.31 * j as f64)).sin()
+                            * if j == 2 { 0.8 } else { 1.0 }
                 });
-                let motor: [f64; 5] = std::array::from_fn(|j| (q[j] - offset[j]) / truth.robot.joints.gear_ratio[j]);
+                let motor: [f64; 5] =
+                    std::array::from_fn(|j| (q[j] - offset[j]) / truth.robot.joints.gear_ratio[j]);
                 let counts = truth.robot.counts_from_motor_angles(&motor);
                 let mut obs = Observation {
                     frame: k as u32,
                     exposure_ns: k as f64 * 5e7,
                     latency_s: 0.0,
-                    phase: if k % 3 == 0 { Phase::Tip } else { Phase::Excitation },
+                    phase: if k % 3 == 0 {
+                        Phase::Tip
+                    } else {
+                        Phase::Excitation
+                    },
                     counts,
                     count_rates: [0.0; 5],
                     motion: JointMotion::default(),
@@ -366,14 +432,31 @@ pub(crate) mod tests {
         let (blocks, rows) = blocks_of(&observations, |o| o.phase == Phase::Tip);
         let noise = NoiseModel::vicra_default();
         let weights = vec![1.0; blocks.len()];
-        let problem = Problem { layout: &layout, observations: &observations, blocks: &blocks, rows, noise: &noise, weights: &weights };
+        let problem = Problem {
+            layout: &layout,
+            observations: &observations,
+            blocks: &blocks,
+            rows,
+            noise: &noise,
+            weights: &weights,
+        };
         let solution = solve(problem, &start, "test").unwrap();
         let found = layout.values(&solution.model);
         let expected = layout.values(&truth);
         for (k, id) in layout.ids.iter().enumerate() {
-            assert!((found[k] - expected[k]).abs() < 1e-6, "{}: {} vs {}", id.name(), found[k], expected[k]);
+            assert!(
+                (found[k] - expected[k]).abs() < 1e-6,
+                "{}: {} vs {}",
+                id.name(),
+                found[k],
+                expected[k]
+            );
         }
-        let analysis = analyse(&layout, &problem.jacobian(&solution.model), &problem.residuals(&solution.model).0);
+        let analysis = analyse(
+            &layout,
+            &problem.jacobian(&solution.model),
+            &problem.residuals(&solution.model).0,
+        );
         assert_eq!(analysis.rank, layout.len());
         assert!(analysis.near_null.is_empty());
     }
@@ -384,12 +467,21 @@ pub(crate) mod tests {
         let layout = ParamLayout::paper();
         let (blocks, rows) = blocks_of(&observations, |o| o.phase == Phase::Tip);
         let noise = NoiseModel::vicra_default();
-        let weights: Vec<f64> = (0..blocks.len()).map(|i| 0.5 + (i % 2) as f64 * 0.5).collect();
+        let weights: Vec<f64> = (0..blocks.len())
+            .map(|i| 0.5 + (i % 2) as f64 * 0.5)
+            .collect();
         let mut observations = observations;
         for (k, obs) in observations.iter_mut().enumerate() {
             obs.count_rates = [300.0 * (k as f64).cos(), 200.0, -150.0, 90.0, -40.0];
         }
-        let problem = Problem { layout: &layout, observations: &observations, blocks: &blocks, rows, noise: &noise, weights: &weights };
+        let problem = Problem {
+            layout: &layout,
+            observations: &observations,
+            blocks: &blocks,
+            rows,
+            noise: &noise,
+            weights: &weights,
+        };
         let jacobian = problem.jacobian(&start);
         let x = layout.values(&start);
         for (col, id) in layout.ids.iter().enumerate() {
@@ -404,9 +496,16 @@ pub(crate) mod tests {
             let numeric = (at(h) - at(-h)) / (2.0 * h);
             let error = (&numeric - jacobian.column(col)).amax();
             let scale = numeric.amax().max(1.0);
-            assert!(error < 1e-3 * scale, "{}: error {error} of {scale}", id.name());
+            assert!(
+                error < 1e-3 * scale,
+                "{}: error {error} of {scale}",
+                id.name()
+            );
         }
         let latency = analyse(&layout, &jacobian, &problem.residuals(&start).0);
-        assert!(latency.near_null.is_empty(), "moving joints make the latency identifiable");
+        assert!(
+            latency.near_null.is_empty(),
+            "moving joints make the latency identifiable"
+        );
     }
 }

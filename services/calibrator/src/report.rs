@@ -37,6 +37,10 @@ pub struct Report {
     pub identifiability: IdentifiabilityReport,
     /// Held-out validation.
     pub validation: ValidationReport,
+    /// Effects the residual loop added to the paper model, in order.
+    pub effects: Vec<crate::residual_loop::EffectReport>,
+    /// The model after the residual loop and what is left unexplained.
+    pub r#final: crate::residual_loop::FinalReport,
     /// Wall-clock time of the calibration (s).
     pub run_time_s: f64,
 }
@@ -110,7 +114,10 @@ impl NoiseReport {
     /// Report of the dwell noise and the fitted noise.
     pub fn new(dwell: &NoiseModel, fitted: &NoiseModel) -> Self {
         Self {
-            dwell: [ToolNoiseReport::of(&dwell.front), ToolNoiseReport::of(&dwell.back)],
+            dwell: [
+                ToolNoiseReport::of(&dwell.front),
+                ToolNoiseReport::of(&dwell.back),
+            ],
             fitted: [
                 ToolNoiseReport::of(&fitted.front),
                 ToolNoiseReport::of(&fitted.back),
@@ -160,7 +167,11 @@ pub fn model_residuals(
             let raw = raw.unwrap_or([f64::NAN; 6]);
             let q = block.quantity as usize;
             position[q].push((raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2]).sqrt());
-            angle[q].push((raw[3] * raw[3] + raw[4] * raw[4] + raw[5] * raw[5]).sqrt().to_degrees());
+            angle[q].push(
+                (raw[3] * raw[3] + raw[4] * raw[4] + raw[5] * raw[5])
+                    .sqrt()
+                    .to_degrees(),
+            );
         }
         let rms = |v: &Vec<f64>| stats::rms(v.iter().copied());
         (position.map(|v| rms(&v)), angle.map(|v| rms(&v)))

@@ -28,8 +28,7 @@ pub fn joint_angles(model: &CalibModel, obs: &Observation) -> Joints {
     let robot = &model.robot;
     let motor = robot.motor_angles_fractional(&counts);
     let offset = robot.joints.offset.unwrap_or_default();
-    let paper: Joints =
-        std::array::from_fn(|j| robot.joints.gear_ratio[j] * motor[j] + offset[j]);
+    let paper: Joints = std::array::from_fn(|j| robot.joints.gear_ratio[j] * motor[j] + offset[j]);
     if robot.effects.is_empty() {
         paper
     } else {
@@ -53,7 +52,12 @@ pub fn predict_at(
 ) -> Result<Prediction, KinematicsError> {
     let pose = forward(geometry, &q)?;
     let (front_marker, back_marker) = marker_poses(&pose, mounts);
-    Ok(Prediction { joints: q, pose, front_marker, back_marker })
+    Ok(Prediction {
+        joints: q,
+        pose,
+        front_marker,
+        back_marker,
+    })
 }
 
 /// Full prediction of `model` for an observation.
@@ -106,7 +110,11 @@ impl Quantity {
 
 /// Raw residual (measured − predicted) of one quantity: `[dx, dy, dz]` mm then, for poses,
 /// the rotation vector (rad). `None` when the observation lacks the measurement.
-pub fn raw_residual(prediction: &Prediction, obs: &Observation, quantity: Quantity) -> Option<[f64; 6]> {
+pub fn raw_residual(
+    prediction: &Prediction,
+    obs: &Observation,
+    quantity: Quantity,
+) -> Option<[f64; 6]> {
     match quantity {
         Quantity::Front => Some(pose_residual(&obs.front?, &prediction.front_marker)),
         Quantity::Back => Some(pose_residual(&obs.back?, &prediction.back_marker)),
@@ -130,7 +138,10 @@ pub struct Block {
 
 /// The blocks of a set of observations: front and back poses wherever seen, the tip
 /// wherever seen and `use_tip` allows. Returns the blocks and the number of rows.
-pub fn blocks_of(observations: &[Observation], use_tip: impl Fn(&Observation) -> bool) -> (Vec<Block>, usize) {
+pub fn blocks_of(
+    observations: &[Observation],
+    use_tip: impl Fn(&Observation) -> bool,
+) -> (Vec<Block>, usize) {
     let mut blocks = Vec::new();
     let mut row = 0;
     for (index, obs) in observations.iter().enumerate() {
@@ -141,7 +152,11 @@ pub fn blocks_of(observations: &[Observation], use_tip: impl Fn(&Observation) ->
         ];
         for (quantity, seen) in present {
             if seen {
-                blocks.push(Block { obs: index, quantity, row });
+                blocks.push(Block {
+                    obs: index,
+                    quantity,
+                    row,
+                });
                 row += quantity.dim();
             }
         }
@@ -162,7 +177,11 @@ pub fn raw_block_residuals(
         let obs = &observations[group[0].obs];
         let prediction = predict_at(&geometry, &model.robot.markers, joint_angles(model, obs)).ok();
         for block in group {
-            out.push(prediction.as_ref().and_then(|p| raw_residual(p, obs, block.quantity)));
+            out.push(
+                prediction
+                    .as_ref()
+                    .and_then(|p| raw_residual(p, obs, block.quantity)),
+            );
         }
     }
     out

@@ -30,7 +30,11 @@ pub fn mean_rotation(rotations: &[UnitQuaternion<f64>]) -> Option<UnitQuaternion
     let mut sum = Quaternion::new(0.0, 0.0, 0.0, 0.0);
     for r in rotations {
         let q = r.quaternion();
-        sum += if q.dot(first.quaternion()) < 0.0 { -q } else { *q };
+        sum += if q.dot(first.quaternion()) < 0.0 {
+            -q
+        } else {
+            *q
+        };
     }
     Some(UnitQuaternion::from_quaternion(sum))
 }
@@ -48,7 +52,9 @@ pub fn mean_isometry(poses: &[Isometry3<f64>]) -> Option<Isometry3<f64>> {
 
 /// Mean of points; `None` when there are none.
 pub fn mean_point(points: impl Iterator<Item = Point3<f64>>) -> Option<Point3<f64>> {
-    let (sum, n) = points.fold((Vector3::zeros(), 0usize), |(s, n), p| (s + p.coords, n + 1));
+    let (sum, n) = points.fold((Vector3::zeros(), 0usize), |(s, n), p| {
+        (s + p.coords, n + 1)
+    });
     (n > 0).then(|| Point3::from(sum / n as f64))
 }
 

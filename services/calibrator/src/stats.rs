@@ -52,7 +52,11 @@ pub fn robust_line(x: &[f64], y: &[f64]) -> (f64, f64) {
     let mut weights = vec![1.0; x.len()];
     let mut line = weighted_line(x, y, &weights);
     for _ in 0..10 {
-        let residuals: Vec<f64> = x.iter().zip(y).map(|(a, b)| b - line.0 - line.1 * a).collect();
+        let residuals: Vec<f64> = x
+            .iter()
+            .zip(y)
+            .map(|(a, b)| b - line.0 - line.1 * a)
+            .collect();
         let scale = robust_scale(&residuals);
         if scale.is_nan() || scale <= 0.0 {
             break;
@@ -67,7 +71,9 @@ pub fn robust_line(x: &[f64], y: &[f64]) -> (f64, f64) {
 
 /// Root mean square; 0 for an empty slice.
 pub fn rms(values: impl IntoIterator<Item = f64>) -> f64 {
-    let (sum, n) = values.into_iter().fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    let (sum, n) = values
+        .into_iter()
+        .fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
     if n == 0 {
         0.0
     } else {
@@ -82,7 +88,10 @@ mod tests {
     #[test]
     fn robust_line_ignores_a_few_gross_outliers() {
         let x: Vec<f64> = (0..100).map(f64::from).collect();
-        let mut y: Vec<f64> = x.iter().map(|v| 2.0 + 0.5 * v + 0.01 * (v * 7.0).sin()).collect();
+        let mut y: Vec<f64> = x
+            .iter()
+            .map(|v| 2.0 + 0.5 * v + 0.01 * (v * 7.0).sin())
+            .collect();
         y[10] += 50.0;
         y[60] -= 80.0;
         let (a, b) = robust_line(&x, &y);

@@ -58,7 +58,7 @@ pub fn stepwise(
         fit_mounts(&mut model, &sets.excitation)?;
         fit_front_base(&mut model, &sets.excitation)?;
         let cost = marker_cost(&model, &sets.excitation, noise);
-        if !(cost < best_cost) {
+        if cost.is_nan() || cost >= best_cost {
             break;
         }
         let gain = (best_cost - cost) / best_cost;
@@ -74,7 +74,10 @@ pub fn stepwise(
 }
 
 fn failure(reason: String) -> CalibrationError {
-    CalibrationError::Fit { stage: STAGE, reason }
+    CalibrationError::Fit {
+        stage: STAGE,
+        reason,
+    }
 }
 
 /// Whitened sum of squares of the marker residuals over `frames` (infinite if the
@@ -110,8 +113,14 @@ fn fit_gear_ratios(
             continue;
         };
         let start = joint_angles(model, obs);
-        if let Some(p) = joints_from_markers(&geometry, &model.robot.markers, noise, &front, &back, start) {
-            motor.push(model.robot.motor_angles_fractional(&obs.counts_at_latency(model.latency_s)));
+        if let Some(p) =
+            joints_from_markers(&geometry, &model.robot.markers, noise, &front, &back, start)
+        {
+            motor.push(
+                model
+                    .robot
+                    .motor_angles_fractional(&obs.counts_at_latency(model.latency_s)),
+            );
             joints.push(p.joints);
         }
     }
@@ -128,7 +137,10 @@ fn fit_gear_ratios(
         let y: Vec<f64> = joints.iter().map(|q| q[j]).collect();
         let (_, slope) = robust_line(&x, &y);
         if !slope.is_finite() || slope == 0.0 {
-            return Err(failure(format!("gear ratio of joint {} is not determined", j + 1)));
+            return Err(failure(format!(
+                "gear ratio of joint {} is not determined",
+                j + 1
+            )));
         }
         model.robot.joints.gear_ratio[j] = slope;
     }
@@ -148,16 +160,22 @@ fn fit_offsets_from_dwell(
             continue;
         };
         let start = joint_angles(model, obs);
-        let Some(p) = joints_from_markers(&geometry, &model.robot.markers, noise, &front, &back, start) else {
+        let Some(p) =
+            joints_from_markers(&geometry, &model.robot.markers, noise, &front, &back, start)
+        else {
             continue;
         };
-        let motor = model.robot.motor_angles_fractional(&obs.counts_at_latency(model.latency_s));
+        let motor = model
+            .robot
+            .motor_angles_fractional(&obs.counts_at_latency(model.latency_s));
         for j in 0..5 {
             samples[j].push(p.joints[j] - model.robot.joints.gear_ratio[j] * motor[j]);
         }
     }
     if samples[0].is_empty() {
-        return Err(failure("no homing-dwell frame could be turned into joint angles".into()));
+        return Err(failure(
+            "no homing-dwell frame could be turned into joint angles".into(),
+        ));
     }
     let offsets: [f64; 5] = std::array::from_fn(|j| median(&mut samples[j]));
     model.robot.joints.offset = Some(offsets);
@@ -178,7 +196,9 @@ fn fit_mounts(model: &mut CalibModel, frames: &[&Observation]) -> Result<(), Cal
         }
     }
     let (Some(front), Some(back)) = (se3::mean_isometry(&front), se3::mean_isometry(&back)) else {
-        return Err(failure("no excitation frame for the marker mountings".into()));
+        return Err(failure(
+            "no excitation frame for the marker mountings".into(),
+        ));
     };
     model.robot.markers.front_mount = front;
     model.robot.markers.back_mount = back;
@@ -207,7 +227,8 @@ fn fit_front_base(model: &mut CalibModel, frames: &[&Observation]) -> Result<(),
     let rotation = UnitQuaternion::from_scaled_axis(rotation_vector);
     let (ca, cb) = centroids(&pairs);
     let translation = cb.coords - rotation * ca.coords;
-    model.robot.geometry.front_base = Isometry3::from_parts(Translation3::from(translation), rotation);
+    model.robot.geometry.front_base =
+        Isometry3::from_parts(Translation3::from(translation), rotation);
     Ok(())
 }
 
@@ -240,7 +261,10 @@ pub fn register_points(pairs: &[(Point3<f64>, Point3<f64>)]) -> Option<Isometry3
     let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
     let rotation = UnitQuaternion::from_matrix(&r);
     let translation = cb.coords - rotation * ca.coords;
-    Some(Isometry3::from_parts(Translation3::from(translation), rotation))
+    Some(Isometry3::from_parts(
+        Translation3::from(translation),
+        rotation,
+    ))
 }
 
 /// The needle length from the tip sphere: the robust mean of `(p_tip − p_r)·z_N`.
@@ -269,10 +293,17 @@ mod tests {
 
     #[test]
     fn registration_recovers_a_known_motion_of_a_planar_set() {
-        let truth = se3::isometry(Vector3::new(1.0, -2.0, 100.0), Vector3::new(0.01, -0.02, 0.3));
+        let truth = se3::isometry(
+            Vector3::new(1.0, -2.0, 100.0),
+            Vector3::new(0.01, -0.02, 0.3),
+        );
         let pairs: Vec<_> = (0..20)
             .map(|k| {
-                let a = Point3::new(f64::from(k).cos() * 40.0, f64::from(k * 3).sin() * 30.0, 15.0);
+                let a = Point3::new(
+                    f64::from(k).cos() * 40.0,
+                    f64::from(k * 3).sin() * 30.0,
+                    15.0,
+                );
                 (a, truth * a)
             })
             .collect();

@@ -1,8 +1,10 @@
 //! Time synchronisation: the exposure clock of the tracker (a robust line through the frame
 //! counter and the host arrival stamps) and the encoder stream interpolated at any host time.
 
+use sabr_model::JointMotion;
 use sabr_recording::EncoderRow;
 
+use crate::residual_loop::motion::{MotionTrack, DIRECTION_DEAD_BAND_COUNTS};
 use crate::stats::{huber_weight, median, robust_scale, weighted_line};
 use crate::CalibrationError;
 
@@ -91,8 +93,8 @@ impl ClockFit {
                 .map(|r| huber_weight(r / scale, 1.345))
                 .collect();
             let (new_intercept, new_slope) = weighted_line(&x, &y, &weights);
-            let converged = (new_slope - slope).abs() < 1e-9 * slope
-                && (new_intercept - intercept).abs() < 1.0;
+            let converged =
+                (new_slope - slope).abs() < 1e-9 * slope && (new_intercept - intercept).abs() < 1.0;
             intercept = new_intercept;
             slope = new_slope;
             if converged {
@@ -132,6 +134,7 @@ pub struct EncoderTrack {
     times_ns: Vec<i64>,
     counts: Vec<[i64; 5]>,
     max_gap_ns: i64,
+    motion: MotionTrack,
 }
 
 impl EncoderTrack {
@@ -146,11 +149,21 @@ impl EncoderTrack {
         }
         let mut sorted = rows.to_vec();
         sorted.sort_by_key(|row| row.t_ns);
+        let times_ns: Vec<i64> = sorted.iter().map(|r| r.t_ns).collect();
+        let counts: Vec<[i64; 5]> = sorted.iter().map(|r| r.counts).collect();
+        let motion = MotionTrack::new(&times_ns, &counts, DIRECTION_DEAD_BAND_COUNTS);
         Ok(Self {
-            times_ns: sorted.iter().map(|r| r.t_ns).collect(),
-            counts: sorted.iter().map(|r| r.counts).collect(),
+            times_ns,
+            counts,
             max_gap_ns,
+            motion,
         })
+    }
+
+    /// Direction of motion of every joint at host time `t_ns` (from the count history, see
+    /// [`MotionTrack`]).
+    pub fn motion_at(&self, t_ns: f64) -> JointMotion {
+        self.motion.at(t_ns)
     }
 
     /// Counts (fractional) at host time `t_ns`; `None` outside the stream or inside a gap
@@ -162,7 +175,8 @@ impl EncoderTrack {
         }
         if i == self.times_ns.len() {
             let last = i - 1;
-            return (self.times_ns[last] as f64 == t_ns).then(|| self.counts[last].map(|c| c as f64));
+            return (self.times_ns[last] as f64 == t_ns)
+                .then(|| self.counts[last].map(|c| c as f64));
         }
         let (t0, t1) = (self.times_ns[i - 1], self.times_ns[i]);
         if t1 - t0 > self.max_gap_ns {
@@ -241,7 +255,10 @@ mod tests {
         let rows: Vec<EncoderRow> = [0i64, 1_000_000, 2_000_000, 10_000_000]
             .iter()
             .enumerate()
-            .map(|(i, &t)| EncoderRow { t_ns: t, counts: [i as i64 * 10, 0, 0, 0, -(i as i64)] })
+            .map(|(i, &t)| EncoderRow {
+                t_ns: t,
+                counts: [i as i64 * 10, 0, 0, 0, -(i as i64)],
+            })
             .collect();
         let track = EncoderTrack::new(&rows, 5_000_000).unwrap();
         let c = track.counts_at(1_500_000.0).unwrap();

@@ -63,10 +63,7 @@ pub struct Hold {
 /// counts, both markers seen).
 pub fn validation_holds(observations: &[Observation]) -> Vec<Hold> {
     let is_static = |o: &Observation| {
-        o.phase == Phase::Validation
-            && o.front.is_some()
-            && o.back.is_some()
-            && o.count_rates.iter().all(|r| r.abs() < STATIC_RATE)
+        o.phase == Phase::Validation && o.count_rates.iter().all(|r| r.abs() < STATIC_RATE)
     };
     let mut holds = Vec::new();
     let mut run: Vec<&Observation> = Vec::new();
@@ -77,13 +74,17 @@ pub fn validation_holds(observations: &[Observation]) -> Vec<Hold> {
         run.clear();
     };
     for obs in observations {
-        let same_pose = run.last().is_some_and(|last: &&Observation| {
-            last.counts.iter().zip(&obs.counts).all(|(a, b)| (a - b).abs() < 1.0)
+        let same_pose = run.last().is_none_or(|last: &&Observation| {
+            last.counts
+                .iter()
+                .zip(&obs.counts)
+                .all(|(a, b)| (a - b).abs() < 1.0)
         });
-        if !is_static(obs) || (!run.is_empty() && !same_pose) {
+        if !is_static(obs) || !same_pose {
             flush(&mut run);
         }
-        if is_static(obs) {
+        // A frame that misses a marker neither ends a hold nor joins it.
+        if is_static(obs) && obs.front.is_some() && obs.back.is_some() {
             run.push(obs);
         }
     }
@@ -103,7 +104,10 @@ fn mean_hold(run: &[&Observation]) -> Hold {
     observation.front = se3::mean_isometry(&fronts);
     observation.back = se3::mean_isometry(&backs);
     observation.tip = tip;
-    Hold { observation, frames: run.len() }
+    Hold {
+        observation,
+        frames: run.len(),
+    }
 }
 
 /// Tip error against the tip sphere at the holds that saw it; `None` without tip data.
@@ -167,7 +171,10 @@ pub fn cross_validated_tip(fit: &JointFit) -> Option<TipError> {
         let mut model = fit.model.clone();
         fit.layout.apply(&mut model, &(&x + step));
         let blocks: Vec<Block> = fold.iter().map(|&b| fit.blocks[b]).collect();
-        for raw in raw_block_residuals(&model, &fit.observations, &blocks).into_iter().flatten() {
+        for raw in raw_block_residuals(&model, &fit.observations, &blocks)
+            .into_iter()
+            .flatten()
+        {
             errors.push((raw[0] * raw[0] + raw[1] * raw[1] + raw[2] * raw[2]).sqrt());
         }
     }
@@ -183,7 +190,9 @@ pub fn predicted_tip_std(fit: &JointFit, holds: &[Hold]) -> Vec<f64> {
     if sigma.iter().any(|s| !s.is_finite()) {
         return Vec::new();
     }
-    let covariance = DMatrix::from_fn(n, n, |a, b| fit.analysis.correlation[(a, b)] * sigma[a] * sigma[b]);
+    let covariance = DMatrix::from_fn(n, n, |a, b| {
+        fit.analysis.correlation[(a, b)] * sigma[a] * sigma[b]
+    });
     holds
         .iter()
         .filter_map(|h| {
@@ -196,7 +205,12 @@ pub fn predicted_tip_std(fit: &JointFit, holds: &[Hold]) -> Vec<f64> {
                 let d = (tip - base) / id.step();
                 jacobian.set_column(k, &d);
             }
-            Some((&jacobian * &covariance * jacobian.transpose()).trace().max(0.0).sqrt())
+            Some(
+                (&jacobian * &covariance * jacobian.transpose())
+                    .trace()
+                    .max(0.0)
+                    .sqrt(),
+            )
         })
         .collect()
 }

@@ -21,7 +21,10 @@ fn a_missing_phase_is_named() {
         let mut recording = short_recording();
         recording.phases.retain(|p| p.phase != phase);
         let error = error_of(&recording);
-        assert!(matches!(error, CalibrationError::MissingPhase { .. }), "{error}");
+        assert!(
+            matches!(error, CalibrationError::MissingPhase { .. }),
+            "{error}"
+        );
         assert!(error.to_string().contains(&format!("`{phase}`")), "{error}");
     }
 }
@@ -31,10 +34,17 @@ fn no_tracker_frames_or_no_base_marker_is_refused() {
     let mut recording = short_recording();
     recording.tracker.clear();
     let error = error_of(&recording);
-    assert!(matches!(error, CalibrationError::NoTrackerFrames(_)), "{error}");
+    assert!(
+        matches!(error, CalibrationError::NoTrackerFrames(_)),
+        "{error}"
+    );
 
     let mut recording = short_recording();
-    for row in recording.tracker.iter_mut().filter(|r| r.tool == Tool::Base) {
+    for row in recording
+        .tracker
+        .iter_mut()
+        .filter(|r| r.tool == Tool::Base)
+    {
         row.reading = ToolReading::Missing;
     }
     let error = error_of(&recording);
@@ -52,7 +62,10 @@ fn a_joint_that_did_not_move_makes_its_gear_ratio_unidentifiable() {
         matches!(error, CalibrationError::TooLittleMotion { joint: 3, .. }),
         "{error}"
     );
-    assert!(error.to_string().contains("gear ratio is not identifiable"), "{error}");
+    assert!(
+        error.to_string().contains("gear ratio is not identifiable"),
+        "{error}"
+    );
 }
 
 #[test]
@@ -62,7 +75,13 @@ fn a_tip_phase_without_tip_readings_leaves_the_needle_length_unidentified() {
         row.reading = ToolReading::Missing;
     }
     let error = error_of(&recording);
-    assert!(matches!(error, CalibrationError::InsufficientData { phase: "tip", .. }), "{error}");
+    assert!(
+        matches!(
+            error,
+            CalibrationError::InsufficientData { phase: "tip", .. }
+        ),
+        "{error}"
+    );
     assert!(error.to_string().contains("needle length"), "{error}");
 }
 
@@ -81,5 +100,14 @@ fn a_homing_phase_without_a_dwell_is_refused() {
         }
     }
     let error = error_of(&recording);
-    assert!(matches!(error, CalibrationError::InsufficientData { phase: "homing", .. }), "{error}");
+    assert!(
+        matches!(
+            error,
+            CalibrationError::InsufficientData {
+                phase: "homing",
+                ..
+            }
+        ),
+        "{error}"
+    );
 }

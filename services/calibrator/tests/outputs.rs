@@ -8,7 +8,10 @@ use sabr_calibrator::{calibrate, write_outputs, CalibrationOptions};
 use sabr_model::{forward, JointMotion, RobotParams};
 
 #[test]
-#[cfg_attr(debug_assertions, ignore = "heavy: cargo test --release -p sabr-calibrator")]
+#[cfg_attr(
+    debug_assertions,
+    ignore = "heavy: cargo test --release -p sabr-calibrator"
+)]
 fn params_toml_report_json_and_html_are_written_and_consistent() {
     let (recording, _truth) = session(11, 0.4);
     let calibration = calibrate(&recording, &CalibrationOptions::default()).unwrap();
@@ -18,7 +21,11 @@ fn params_toml_report_json_and_html_are_written_and_consistent() {
 
     let text = std::fs::read_to_string(out.join("params.toml")).unwrap();
     let params = RobotParams::from_toml_str(&text).unwrap();
-    let latency = params.calibration.as_ref().and_then(|c| c.latency_ms).unwrap();
+    let latency = params
+        .calibration
+        .as_ref()
+        .and_then(|c| c.latency_ms)
+        .unwrap();
     assert!((latency - calibration.report.latency_ms).abs() < 1e-9);
     // The file reproduces the calibrated predictions at the validation holds.
     assert!(!calibration.predictions.is_empty());
@@ -45,7 +52,12 @@ fn params_toml_report_json_and_html_are_written_and_consistent() {
     assert!(parameters.iter().all(|p| p["std_dev"].as_f64().is_some()));
     assert!(json["validation"]["tip_error"]["rms_mm"].as_f64().unwrap() > 0.0);
     assert!(json["run_time_s"].as_f64().unwrap() > 0.0);
-    assert!(json["identifiability"]["condition_number"].as_f64().unwrap() >= 1.0);
+    assert!(
+        json["identifiability"]["condition_number"]
+            .as_f64()
+            .unwrap()
+            >= 1.0
+    );
 
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.contains("gear_ratio[3]"));

@@ -234,8 +234,8 @@ mod tests {
             first.counts[i] * TAU / f64::from(truth.params.joints.counts_per_rev[i])
         });
         let paper = truth.paper_joints(&motor);
-        for i in 0..5 {
-            assert!((paper[i] - first.joints[i]).abs() < 1e-9);
+        for (p, q) in paper.iter().zip(&first.joints) {
+            assert!((p - q).abs() < 1e-9, "{p} vs {q}");
         }
         let z = first.direction;
         assert!(((z[0] * z[0] + z[1] * z[1] + z[2] * z[2]).sqrt() - 1.0).abs() < 1e-9);

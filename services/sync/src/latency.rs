@@ -62,9 +62,10 @@ pub fn read_parameter_set(path: &Path) -> Result<ParameterSet, ParamsFileError> 
     };
     let params = RobotParams::from_toml_str(&text).map_err(|e| invalid(e.to_string()))?;
     let latency_ns = match params.calibration.as_ref().and_then(|c| c.latency_ms) {
-        Some(ms) => Some(latency_ns(ms).map_err(|reason| {
-            invalid(format!("field `calibration.latency_ms`: {reason}"))
-        })?),
+        Some(ms) => Some(
+            latency_ns(ms)
+                .map_err(|reason| invalid(format!("field `calibration.latency_ms`: {reason}")))?,
+        ),
         None => None,
     };
     Ok(ParameterSet {
@@ -166,7 +167,10 @@ mod tests {
                 source: LatencySource::Calibrated
             })
         );
-        assert!(!setting.apply(&without), "a later set without latency keeps it");
+        assert!(
+            !setting.apply(&without),
+            "a later set without latency keeps it"
+        );
         assert_eq!(LatencySetting::new(None).current(), None);
     }
 

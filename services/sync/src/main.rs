@@ -6,9 +6,7 @@
 
 use anyhow::{bail, Context};
 use clap::Parser;
-use sabr_msgs::{
-    services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame,
-};
+use sabr_msgs::{services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame};
 use sabr_node::{monotonic_ns, Deadline, NodeRuntime};
 use sabr_sync::clock::ClockConfig;
 use sabr_sync::encoder_buffer::Pushed;
@@ -81,7 +79,10 @@ fn matcher_config(args: &Args) -> anyhow::Result<MatcherConfig> {
         bail!("--buffer-s must be at least 2 s, got {}", args.buffer_s);
     }
     if args.window_frames < 20 {
-        bail!("--window-frames must be at least 20, got {}", args.window_frames);
+        bail!(
+            "--window-frames must be at least 20, got {}",
+            args.window_frames
+        );
     }
     if !(args.max_clock_uncertainty_us.is_finite() && args.max_clock_uncertainty_us > 0.0) {
         bail!(
@@ -259,7 +260,10 @@ impl Watch {
         match result {
             Ok(()) if !self.locked => {
                 self.locked = true;
-                tracing::info!(frame_number, "frame clock locked: publishing matched samples");
+                tracing::info!(
+                    frame_number,
+                    "frame clock locked: publishing matched samples"
+                );
             }
             Ok(()) => {}
             Err(Unmatched::Learning {

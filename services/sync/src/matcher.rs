@@ -215,9 +215,16 @@ impl Matcher {
     /// Matches every waiting frame whose encoder data is complete, in order, at host time
     /// `now_ns`; hands each result to `out` (a matched sample, or the frame's counter and
     /// why it was given up).
-    pub fn poll(&mut self, now_ns: i64, mut out: impl FnMut(Result<MatchedSample, (u32, Unmatched)>)) {
+    pub fn poll(
+        &mut self,
+        now_ns: i64,
+        mut out: impl FnMut(Result<MatchedSample, (u32, Unmatched)>),
+    ) {
         while let Some(pending) = self.pending.front().copied() {
-            let result = match self.encoders.at(pending.exposure_ns, self.config.max_span_ns) {
+            let result = match self
+                .encoders
+                .at(pending.exposure_ns, self.config.max_span_ns)
+            {
                 Lookup::Found(found) => Ok(self.matched(&pending, found)),
                 Lookup::NotYet if now_ns - pending.received_ns <= self.config.match_timeout_ns => {
                     return;
@@ -238,7 +245,11 @@ impl Matcher {
         }
     }
 
-    fn matched(&mut self, pending: &Pending, found: crate::encoder_buffer::Interpolated) -> MatchedSample {
+    fn matched(
+        &mut self,
+        pending: &Pending,
+        found: crate::encoder_buffer::Interpolated,
+    ) -> MatchedSample {
         self.seq += 1;
         let cpr = self.counts_per_rev;
         MatchedSample {
@@ -286,7 +297,12 @@ mod tests {
     /// increment; returns the matched samples with their true exposure times.
     fn session(increment: u32, seconds: i64) -> (Vec<(MatchedSample, i64)>, MatchStats) {
         let mut matcher = Matcher::new(MatcherConfig::default(), [2000, 2000, 4000, 2000, 2000]);
-        let encoders = encoder_samples(4_900_000_000, 1_000_000, (seconds * 1000) as usize + 200, 20_000);
+        let encoders = encoder_samples(
+            4_900_000_000,
+            1_000_000,
+            (seconds * 1000) as usize + 200,
+            20_000,
+        );
         let mut stream = TrackerStream::new(3, 50_000_000.0, increment, LATENCY.ns);
         let mut frames = Vec::new();
         while let Some(f) = stream.next_frame().or_else(|| stream.next_frame()) {
@@ -301,7 +317,8 @@ mod tests {
         for sample in encoders {
             while next_frame < frames.len() && frames[next_frame].arrival_ns <= sample.t_ns {
                 let f = frames[next_frame];
-                let _ = matcher.push_frame(frame(f.counter, f.arrival_ns), Some(LATENCY), f.arrival_ns);
+                let _ =
+                    matcher.push_frame(frame(f.counter, f.arrival_ns), Some(LATENCY), f.arrival_ns);
                 next_frame += 1;
             }
             matcher.push_encoder(sample);
@@ -330,7 +347,11 @@ mod tests {
         for (m, _) in &matched {
             assert_eq!(m.quality.latency_ns, LATENCY.ns);
             assert!(m.quality.interpolation_span_ns <= 1_040_000);
-            assert!(m.quality.clock_spread_ns > 500_000 && m.quality.clock_spread_ns < 1_500_000);
+            let spread = m.quality.clock_spread_ns;
+            assert!(
+                (500_000..1_500_000).contains(&spread),
+                "spread {spread} ns: {m:?}"
+            );
             // The counts are those at the estimated exposure, within a count.
             let expected = true_counts(m.exposure_t_ns);
             assert!((m.counts[0] - expected[0]).abs() < 1.0);
@@ -402,7 +423,12 @@ mod tests {
             ..MatcherConfig::default()
         };
         let mut matcher = Matcher::new(config, [2000; 5]);
-        for (seq, t) in [(1u64, 0i64), (2, 1_000_000), (12, 11_000_000), (13, 12_000_000)] {
+        for (seq, t) in [
+            (1u64, 0i64),
+            (2, 1_000_000),
+            (12, 11_000_000),
+            (13, 12_000_000),
+        ] {
             matcher.push_encoder(EncoderSample {
                 seq,
                 t_ns: t,
@@ -427,8 +453,18 @@ mod tests {
             vec![
                 Err((2, Unmatched::TooOld)),
                 Ok(3),
-                Err((4, Unmatched::Gap { span_ns: 10_000_000 })),
-                Err((5, Unmatched::Gap { span_ns: 10_000_000 }))
+                Err((
+                    4,
+                    Unmatched::Gap {
+                        span_ns: 10_000_000
+                    }
+                )),
+                Err((
+                    5,
+                    Unmatched::Gap {
+                        span_ns: 10_000_000
+                    }
+                ))
             ]
         );
         assert_eq!(matcher.stats().gaps, 2);

@@ -88,7 +88,12 @@ pub fn true_counts(t_ns: i64) -> [f64; 5] {
 
 /// Encoder samples every `period_ns` from `start_ns` with ±`jitter_ns` uniform sampling
 /// jitter; counts are the true counts, rounded.
-pub fn encoder_samples(start_ns: i64, period_ns: i64, n: usize, jitter_ns: i64) -> Vec<EncoderSample> {
+pub fn encoder_samples(
+    start_ns: i64,
+    period_ns: i64,
+    n: usize,
+    jitter_ns: i64,
+) -> Vec<EncoderSample> {
     let mut rng = ChaCha8Rng::seed_from_u64(99);
     (0..n)
         .map(|k| {

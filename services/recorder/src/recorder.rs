@@ -1,0 +1,293 @@
+//! The live streams turned into recording rows (robot-model.md §7) and written as they come.
+
+use sabr_msgs::{EncoderSample, PhaseMark, ToolSample, ToolStatus, TrackerFrame};
+use sabr_recording::{
+    EncoderRow, FlushPolicy, PhaseRow, RecordingError, RecordingWriter, Tool, ToolReading,
+    TrackerRow,
+};
+use std::path::Path;
+
+/// Counters of a recording.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RecorderStats {
+    /// Rows written to `encoders.csv`.
+    pub encoder_rows: u64,
+    /// Tracker frames written (one `tracker.csv` row per tool each).
+    pub tracker_frames: u64,
+    /// Rows written to `phases.csv`.
+    pub phase_rows: u64,
+    /// Encoder samples lost before they reached the recorder (sequence-number gaps).
+    pub encoder_lost: u64,
+    /// Times the encoder sequence restarted (the encoders process restarted).
+    pub encoder_restarts: u64,
+    /// Rows the writer refused (bad time order, non-finite numbers, ...); each is logged.
+    pub refused: u64,
+}
+
+/// What an encoder sample revealed about the stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Continuity {
+    /// Next in sequence (or the first).
+    InSequence,
+    /// `lost` samples are missing before it.
+    Lost(u64),
+    /// The sequence started over.
+    Restarted,
+}
+
+/// Writes the live streams into one recording directory.
+#[derive(Debug)]
+pub struct Recorder {
+    writer: RecordingWriter,
+    last_encoder_seq: Option<u64>,
+    stats: RecorderStats,
+}
+
+impl Recorder {
+    /// Creates the recording in `dir` with `robot_toml` as its nominal model.
+    pub fn create(
+        dir: &Path,
+        robot_toml: &str,
+        flush: FlushPolicy,
+    ) -> Result<Self, RecordingError> {
+        Ok(Self {
+            writer: RecordingWriter::create_with(dir, robot_toml, flush)?,
+            last_encoder_seq: None,
+            stats: RecorderStats::default(),
+        })
+    }
+
+    /// The recording directory.
+    pub fn dir(&self) -> &Path {
+        self.writer.dir()
+    }
+
+    /// What was written so far.
+    pub fn stats(&self) -> RecorderStats {
+        self.stats
+    }
+
+    /// Appends an encoder sample. The continuity is checked before the row is written; a
+    /// refused row is an error (the recording stays valid without it).
+    pub fn encoder(&mut self, sample: &EncoderSample) -> Result<Continuity, RecordingError> {
+        let continuity = match self.last_encoder_seq {
+            Some(last) if sample.seq == last.wrapping_add(1) => Continuity::InSequence,
+            Some(last) if sample.seq > last => Continuity::Lost(sample.seq - last - 1),
+            Some(_) => Continuity::Restarted,
+            None => Continuity::InSequence,
+        };
+        self.last_encoder_seq = Some(sample.seq);
+        match continuity {
+            Continuity::Lost(lost) => self.stats.encoder_lost += lost,
+            Continuity::Restarted => self.stats.encoder_restarts += 1,
+            Continuity::InSequence => {}
+        }
+        let row = EncoderRow {
+            t_ns: sample.t_ns,
+            counts: sample.counts,
+        };
+        let written = self.writer.write_encoder(&row);
+        self.count(written)?;
+        self.stats.encoder_rows += 1;
+        Ok(continuity)
+    }
+
+    /// Appends one `tracker.csv` row per tool of a frame (base, front, back, tip). A refused
+    /// row does not stop the other tools' rows; the first refusal is returned.
+    pub fn frame(&mut self, frame: &TrackerFrame) -> Result<(), RecordingError> {
+        let mut first_error = None;
+        for (tool, sample) in Tool::ALL.into_iter().zip(&frame.tools) {
+            let row = TrackerRow {
+                t_ns: frame.arrival_t_ns,
+                frame: frame.frame_number,
+                tool,
+                reading: reading(tool, sample),
+            };
+            let written = self.writer.write_tracker(&row);
+            if let Err(error) = self.count(written) {
+                first_error.get_or_insert(error);
+            }
+        }
+        self.stats.tracker_frames += 1;
+        first_error.map_or(Ok(()), Err)
+    }
+
+    /// Appends a phase.
+    pub fn phase(&mut self, mark: &PhaseMark) -> Result<(), RecordingError> {
+        let row = PhaseRow {
+            t_start_ns: mark.t_start_ns,
+            t_end_ns: mark.t_end_ns,
+            phase: mark.phase.as_str().to_owned(),
+        };
+        let written = self.writer.write_phase(&row);
+        self.count(written)?;
+        self.stats.phase_rows += 1;
+        Ok(())
+    }
+
+    /// Hands every buffered row to the operating system.
+    pub fn flush(&mut self) -> Result<(), RecordingError> {
+        self.writer.flush()
+    }
+
+    /// Flushes, syncs every file to disk and returns the counters.
+    pub fn finish(self) -> Result<RecorderStats, RecordingError> {
+        self.writer.finish()?;
+        Ok(self.stats)
+    }
+
+    fn count(&mut self, written: Result<(), RecordingError>) -> Result<(), RecordingError> {
+        if matches!(written, Err(RecordingError::Refused { .. })) {
+            self.stats.refused += 1;
+        }
+        written
+    }
+}
+
+/// A tool's reading as recorded: a pose for the markers, a point for the tip. Format v1 has
+/// no `disabled` status: a tool not enabled on the tracker is recorded as `missing`.
+fn reading(tool: Tool, sample: &ToolSample) -> ToolReading {
+    match sample.status {
+        ToolStatus::Ok if tool == Tool::Tip => ToolReading::Point {
+            position: sample.position_mm,
+            rms: sample.rms_mm,
+        },
+        ToolStatus::Ok => ToolReading::Pose {
+            quaternion: sample.quaternion,
+            position: sample.position_mm,
+            rms: sample.rms_mm,
+        },
+        ToolStatus::Missing | ToolStatus::Disabled => ToolReading::Missing,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sabr_msgs::FixedString;
+    use sabr_recording::Recording;
+    use std::num::NonZeroUsize;
+
+    fn encoder(seq: u64) -> EncoderSample {
+        EncoderSample {
+            seq,
+            t_ns: 1_000_000 * seq as i64,
+            counts: [seq as i64, -1, 2, 3, 4],
+        }
+    }
+
+    fn frame(frame_number: u32) -> TrackerFrame {
+        let pose = ToolSample {
+            status: ToolStatus::Ok,
+            quaternion: [0.5, 0.5, -0.5, 0.5],
+            position_mm: [1.0, 2.5, -900.0],
+            rms_mm: 0.125,
+        };
+        let mut tools = [pose; 4];
+        tools[2].status = ToolStatus::Missing;
+        tools[3] = ToolSample {
+            status: ToolStatus::Ok,
+            quaternion: [1.0, 0.0, 0.0, 0.0],
+            position_mm: [3.0, 4.0, -850.0],
+            rms_mm: 0.0,
+        };
+        TrackerFrame {
+            seq: u64::from(frame_number),
+            arrival_t_ns: 50_000_000 * i64::from(frame_number),
+            frame_number,
+            tools,
+        }
+    }
+
+    #[test]
+    fn streams_round_trip_through_the_reader() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("rec");
+        let toml = sabr_model::RobotParams::nominal().to_toml_string();
+        let mut recorder = Recorder::create(&out, &toml, FlushPolicy::default()).unwrap();
+        for seq in 1..=5 {
+            assert_eq!(
+                recorder.encoder(&encoder(seq)).unwrap(),
+                Continuity::InSequence
+            );
+        }
+        assert_eq!(recorder.encoder(&encoder(9)).unwrap(), Continuity::Lost(3));
+        recorder.frame(&frame(7)).unwrap();
+        recorder
+            .phase(&PhaseMark {
+                seq: 1,
+                t_start_ns: 10,
+                t_end_ns: 20,
+                phase: FixedString::new("excitation").unwrap(),
+            })
+            .unwrap();
+        let stats = recorder.finish().unwrap();
+        assert_eq!(stats.encoder_rows, 6);
+        assert_eq!(stats.encoder_lost, 3);
+        assert_eq!(stats.tracker_frames, 1);
+
+        let recording = Recording::read(&out).unwrap();
+        assert_eq!(recording.robot_toml, toml);
+        assert_eq!(recording.encoders.len(), 6);
+        assert_eq!(recording.encoders[5].counts, [9, -1, 2, 3, 4]);
+        assert_eq!(recording.tracker.len(), 4);
+        let tools: Vec<Tool> = recording.tracker.iter().map(|r| r.tool).collect();
+        assert_eq!(tools, Tool::ALL);
+        assert!(
+            matches!(recording.tracker[0].reading, ToolReading::Pose { rms, .. } if rms == 0.125)
+        );
+        assert_eq!(recording.tracker[2].reading, ToolReading::Missing);
+        assert_eq!(
+            recording.tracker[3].reading,
+            ToolReading::Point {
+                position: [3.0, 4.0, -850.0],
+                rms: 0.0
+            }
+        );
+        assert_eq!(recording.tracker[3].t_ns, 350_000_000);
+        assert_eq!(recording.phases[0].phase, "excitation");
+    }
+
+    #[test]
+    fn refused_rows_are_counted_and_the_rest_stays_readable() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("rec");
+        let mut recorder = Recorder::create(&out, "format = 1\n", FlushPolicy::default()).unwrap();
+        recorder.encoder(&encoder(2)).unwrap();
+        // Same time stamp again, then a restarted sequence going back in time.
+        let error = recorder.encoder(&encoder(2)).unwrap_err();
+        assert!(error.to_string().contains("encoders.csv"), "{error}");
+        let mut bad = frame(1);
+        bad.tools[0].position_mm[0] = f64::NAN;
+        assert!(recorder.frame(&bad).is_err());
+        assert_eq!(recorder.stats().refused, 2);
+        assert_eq!(recorder.stats().encoder_restarts, 1);
+        recorder.finish().unwrap();
+        let recording = Recording::read(&out).unwrap();
+        assert_eq!(recording.encoders.len(), 1);
+        let tools: Vec<Tool> = recording.tracker.iter().map(|r| r.tool).collect();
+        assert_eq!(
+            tools,
+            [Tool::Front, Tool::Back, Tool::Tip],
+            "the other tools are kept"
+        );
+    }
+
+    #[test]
+    fn flushed_rows_survive_without_finish() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("rec");
+        let policy = FlushPolicy::EveryRows(NonZeroUsize::MIN);
+        let mut recorder = Recorder::create(&out, "format = 1\n", policy).unwrap();
+        for seq in 1..=100 {
+            recorder.encoder(&encoder(seq)).unwrap();
+        }
+        recorder.frame(&frame(3)).unwrap();
+        // As after SIGKILL: the process never finishes, the rows handed over are there.
+        std::mem::forget(recorder);
+        let salvage = Recording::read_salvage(&out).unwrap();
+        assert_eq!(salvage.recording.encoders.len(), 100);
+        assert_eq!(salvage.recording.tracker.len(), 4);
+        assert!(salvage.dropped.is_empty());
+    }
+}

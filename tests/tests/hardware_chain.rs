@@ -1,0 +1,285 @@
+//! The hardware side of the graph as real processes: `sabr-rig` (autoplaying the session plan,
+//! started once the sensors are ready), `sabr-encoders` and `sabr-tracker` on the rig's
+//! pseudo-terminal, in a fresh domain. A test node subscribes to their streams and checks
+//! rates, sequence numbers, frame numbers, poses against the rig's truth and the phase
+//! announcements; then SIGTERM stops everything and no shared memory of the domain is left.
+//!
+//! Needs the service binaries: `cargo build --workspace --bins` before the tests.
+
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use sabr_integration_tests::{process_alive, test_domain};
+use sabr_msgs::{
+    services, EncoderSample, Lifecycle, LifecycleState, PhaseMark, RigTruth, Tool, TrackerFrame,
+};
+use sabr_node::{Domain, GraphObserver, NodeRuntime, Subscriber};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// Data collected after every stream started and the plan's homing phase ended.
+const COLLECT: Duration = Duration::from_secs(5);
+/// Upper bound for the whole collection.
+const TIMEOUT: Duration = Duration::from_secs(40);
+
+/// A service binary next to the test executable (`target/<profile>/<name>`).
+fn service_bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile> directory");
+    let path = dir.join(name);
+    assert!(
+        path.is_file(),
+        "{} is missing: build the services first (`cargo build --workspace --bins`)",
+        path.display()
+    );
+    path
+}
+
+/// A node process of the test, killed if the test fails before stopping it.
+struct NodeProcess {
+    name: &'static str,
+    child: Child,
+    log: PathBuf,
+}
+
+impl NodeProcess {
+    fn start(name: &'static str, exec: &str, args: &[&str], domain: &Domain, dir: &Path) -> Self {
+        let log = dir.join(format!("{name}.log"));
+        let out = std::fs::File::create(&log).expect("log file");
+        let child = Command::new(service_bin(exec))
+            .args(args)
+            .env("SABR_DOMAIN", domain.as_str())
+            .env("SABR_NODE_NAME", name)
+            .env("SABR_RUN_DIR", dir)
+            .stdin(Stdio::null())
+            .stdout(out.try_clone().expect("log file"))
+            .stderr(out)
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {exec}: {e}"));
+        NodeProcess { name, child, log }
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// SIGTERM, then the exit status within `timeout`.
+    fn terminate(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let _ = kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM);
+        let start = Instant::now();
+        while start.elapsed() < timeout {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return Some(status);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        None
+    }
+}
+
+impl Drop for NodeProcess {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Everything received from the hardware chain.
+#[derive(Default)]
+struct Streams {
+    samples: Vec<EncoderSample>,
+    frames: Vec<TrackerFrame>,
+    truth: Vec<RigTruth>,
+    phases: Vec<PhaseMark>,
+    lifecycle: Vec<Lifecycle>,
+}
+
+struct Inputs {
+    samples: Subscriber<EncoderSample>,
+    frames: Subscriber<TrackerFrame>,
+    truth: Subscriber<RigTruth>,
+    phases: Subscriber<PhaseMark>,
+}
+
+impl Inputs {
+    fn drain(&self, into: &mut Streams) {
+        self.samples.drain(|s| into.samples.push(s)).unwrap();
+        self.frames.drain(|f| into.frames.push(f)).unwrap();
+        self.truth.drain(|t| into.truth.push(t)).unwrap();
+        self.phases.drain(|p| into.phases.push(p)).unwrap();
+    }
+}
+
+fn ready_at(lifecycle: &[Lifecycle], node: &str) -> Option<i64> {
+    lifecycle
+        .iter()
+        .find(|m| m.node.as_str() == node && m.state == LifecycleState::Ready)
+        .map(|m| m.t_ns)
+}
+
+fn rate_hz(times: &[i64]) -> f64 {
+    let span_s = (times[times.len() - 1] - times[0]) as f64 * 1e-9;
+    (times.len() - 1) as f64 / span_s
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+#[test]
+fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
+    let domain = test_domain("hw-chain");
+    assert!(sabr_node::domain_files(&domain).is_empty(), "domain not fresh");
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let link = dir.path().join("polaris-tty");
+
+    let observer = GraphObserver::new(&domain).expect("observer");
+    let rt = NodeRuntime::with_domain("hw-chain-test", domain.clone()).expect("test node");
+    let inputs = Inputs {
+        samples: rt.subscriber(services::ENCODER_SAMPLES).unwrap(),
+        frames: rt.subscriber(services::TRACKER_FRAMES).unwrap(),
+        truth: rt.subscriber(services::RIG_TRUTH).unwrap(),
+        phases: rt.subscriber(services::RIG_PHASES).unwrap(),
+    };
+
+    let rig_args = [
+        "--seed",
+        "5",
+        "--autoplay",
+        "--autoplay-after",
+        "encoders",
+        "--autoplay-after",
+        "tracker",
+        "--duration-scale",
+        "0.02",
+    ];
+    let mut rig = NodeProcess::start("rig", "sabr-rig", &rig_args, &domain, dir.path());
+    let start = Instant::now();
+    while std::fs::symlink_metadata(&link).is_err() {
+        assert!(
+            start.elapsed() < Duration::from_secs(15),
+            "no device path from the rig:\n{}",
+            rig.log()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let mut encoders = NodeProcess::start("encoders", "sabr-encoders", &[], &domain, dir.path());
+    let port = link.to_string_lossy().into_owned();
+    let mut tracker = NodeProcess::start(
+        "tracker",
+        "sabr-tracker",
+        &["--port", &port],
+        &domain,
+        dir.path(),
+    );
+
+    let mut got = Streams::default();
+    let mut collecting_since: Option<Instant> = None;
+    while collecting_since.is_none_or(|since| since.elapsed() < COLLECT) {
+        let logs = || format!("{}\n{}\n{}", rig.log(), encoders.log(), tracker.log());
+        assert!(start.elapsed() < TIMEOUT, "streams incomplete:\n{}", logs());
+        for node in [&mut rig, &mut encoders, &mut tracker] {
+            let status = node.child.try_wait().unwrap();
+            assert!(status.is_none(), "{} exited: {status:?}\n{}", node.name, logs());
+        }
+        std::thread::sleep(Duration::from_millis(2));
+        inputs.drain(&mut got);
+        observer.poll(|m| got.lifecycle.push(m)).unwrap();
+        let flowing = !got.samples.is_empty() && !got.frames.is_empty();
+        if collecting_since.is_none() && flowing && !got.phases.is_empty() {
+            // Compare rates over a window that starts now.
+            got.samples.clear();
+            got.frames.clear();
+            collecting_since = Some(Instant::now());
+        }
+    }
+    inputs.drain(&mut got);
+
+    // Every node announced readiness.
+    for node in ["rig", "encoders", "tracker"] {
+        assert!(ready_at(&got.lifecycle, node).is_some(), "{node} never ready");
+    }
+
+    // Encoder samples: 1 kHz ± 10 %, contiguous sequence numbers, increasing stamps.
+    let samples = &got.samples;
+    assert!(samples.len() > 1000, "{} samples", samples.len());
+    assert!(samples.windows(2).all(|w| w[1].seq == w[0].seq + 1), "sequence gap");
+    assert!(samples.windows(2).all(|w| w[1].t_ns > w[0].t_ns));
+    let times: Vec<i64> = samples.iter().map(|s| s.t_ns).collect();
+    let encoder_rate = rate_hz(&times);
+    assert!((900.0..=1100.0).contains(&encoder_rate), "encoder rate {encoder_rate:.1} Hz");
+    // The plan is moving the robot: the counts change.
+    let (first, last) = (samples[0].counts, samples[samples.len() - 1].counts);
+    assert_ne!(first, last, "counts did not change during the plan");
+
+    // Tracker frames: 20 Hz ± 10 %, increasing frame numbers, plausible poses.
+    let frames = &got.frames;
+    assert!(frames.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    assert!(frames.windows(2).all(|w| w[1].frame_number > w[0].frame_number));
+    let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_t_ns).collect();
+    let frame_rate = rate_hz(&arrivals);
+    assert!((18.0..=22.0).contains(&frame_rate), "tracker rate {frame_rate:.2} Hz");
+    let seen = frames.iter().filter(|f| f.tool(Tool::Base).is_ok()).count();
+    assert!(seen * 10 >= frames.len() * 9, "base seen in {seen} of {} frames", frames.len());
+    for frame in frames.iter().filter(|f| f.tool(Tool::Base).is_ok()) {
+        let base = frame.tool(Tool::Base);
+        let distance = norm(&base.position_mm);
+        assert!((500.0..=1500.0).contains(&distance), "base at {distance} mm");
+        assert!((norm(&base.quaternion) - 1.0).abs() < 1e-3);
+        for tool in [Tool::Front, Tool::Back] {
+            let sample = frame.tool(tool);
+            if sample.is_ok() {
+                let offset: Vec<f64> = (0..3)
+                    .map(|i| sample.position_mm[i] - base.position_mm[i])
+                    .collect();
+                assert!(norm(&offset) < 400.0, "{tool:?} {} mm from the base", norm(&offset));
+            }
+        }
+    }
+
+    // Truth: one per exposure; every received frame has one, exposed 15..100 ms before it
+    // arrived; the true tip is near the home pose's.
+    let truth: HashMap<u32, &RigTruth> = got.truth.iter().map(|t| (t.frame_number, t)).collect();
+    assert!(got.truth.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    for frame in frames {
+        let t = truth
+            .get(&frame.frame_number)
+            .unwrap_or_else(|| panic!("no truth for frame {}", frame.frame_number));
+        let latency_ms = (frame.arrival_t_ns - t.exposure_t_ns) as f64 * 1e-6;
+        assert!((15.0..=100.0).contains(&latency_ms), "latency {latency_ms} ms");
+        let from_home = norm(&[t.tip_mm[0], t.tip_mm[1] + 90.0, t.tip_mm[2] - 180.0]);
+        assert!(from_home < 80.0, "true tip {:?}", t.tip_mm);
+        assert!((norm(&t.direction) - 1.0).abs() < 1e-9);
+    }
+
+    // Phases: homing announced after it ended; the plan waited for the sensors.
+    let homing = got.phases[0];
+    assert_eq!((homing.seq, homing.phase.as_str()), (1, "homing"));
+    assert!(homing.t_start_ns < homing.t_end_ns);
+    let tracker_ready = ready_at(&got.lifecycle, "tracker").unwrap();
+    // The plan idles 0.5 s and moves ≥ 0.8 s before homing's dwell starts.
+    assert!(
+        homing.t_start_ns >= tracker_ready + 1_300_000_000,
+        "the plan started before the tracker was ready"
+    );
+
+    // Stop in reverse order, as the launcher does; everything leaves cleanly.
+    for node in [&mut tracker, &mut encoders, &mut rig] {
+        let status = node.terminate(Duration::from_secs(5));
+        let status = status.unwrap_or_else(|| panic!("{} ignored SIGTERM", node.name));
+        assert!(status.success(), "{}: {status:?}\n{}", node.name, node.log());
+        assert!(!process_alive(node.child.id()));
+    }
+    assert!(std::fs::symlink_metadata(&link).is_err(), "device path left behind");
+    drop(inputs);
+    drop(rt);
+    drop(observer);
+    let left = sabr_node::release_domain(&domain);
+    assert!(left.is_empty(), "iceoryx2 files left: {left:?}");
+}
