@@ -135,7 +135,10 @@ fn norm(v: &[f64]) -> f64 {
 #[test]
 fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     let domain = test_domain("hw-chain");
-    assert!(sabr_node::domain_files(&domain).is_empty(), "domain not fresh");
+    assert!(
+        sabr_node::domain_files(&domain).is_empty(),
+        "domain not fresh"
+    );
     let dir = tempfile::tempdir().expect("temporary directory");
     let link = dir.path().join("polaris-tty");
 
@@ -182,12 +185,16 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     let mut got = Streams::default();
     let mut collecting_since: Option<Instant> = None;
     while collecting_since.is_none_or(|since| since.elapsed() < COLLECT) {
+        let exited: Vec<String> = [&mut rig, &mut encoders, &mut tracker]
+            .into_iter()
+            .filter_map(|node| {
+                let status = node.child.try_wait().unwrap()?;
+                Some(format!("{} exited: {status:?}", node.name))
+            })
+            .collect();
         let logs = || format!("{}\n{}\n{}", rig.log(), encoders.log(), tracker.log());
+        assert!(exited.is_empty(), "{exited:?}\n{}", logs());
         assert!(start.elapsed() < TIMEOUT, "streams incomplete:\n{}", logs());
-        for node in [&mut rig, &mut encoders, &mut tracker] {
-            let status = node.child.try_wait().unwrap();
-            assert!(status.is_none(), "{} exited: {status:?}\n{}", node.name, logs());
-        }
         std::thread::sleep(Duration::from_millis(2));
         inputs.drain(&mut got);
         observer.poll(|m| got.lifecycle.push(m)).unwrap();
@@ -203,17 +210,26 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
 
     // Every node announced readiness.
     for node in ["rig", "encoders", "tracker"] {
-        assert!(ready_at(&got.lifecycle, node).is_some(), "{node} never ready");
+        assert!(
+            ready_at(&got.lifecycle, node).is_some(),
+            "{node} never ready"
+        );
     }
 
     // Encoder samples: 1 kHz ± 10 %, contiguous sequence numbers, increasing stamps.
     let samples = &got.samples;
     assert!(samples.len() > 1000, "{} samples", samples.len());
-    assert!(samples.windows(2).all(|w| w[1].seq == w[0].seq + 1), "sequence gap");
+    assert!(
+        samples.windows(2).all(|w| w[1].seq == w[0].seq + 1),
+        "sequence gap"
+    );
     assert!(samples.windows(2).all(|w| w[1].t_ns > w[0].t_ns));
     let times: Vec<i64> = samples.iter().map(|s| s.t_ns).collect();
     let encoder_rate = rate_hz(&times);
-    assert!((900.0..=1100.0).contains(&encoder_rate), "encoder rate {encoder_rate:.1} Hz");
+    assert!(
+        (900.0..=1100.0).contains(&encoder_rate),
+        "encoder rate {encoder_rate:.1} Hz"
+    );
     // The plan is moving the robot: the counts change.
     let (first, last) = (samples[0].counts, samples[samples.len() - 1].counts);
     assert_ne!(first, last, "counts did not change during the plan");
@@ -221,16 +237,28 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     // Tracker frames: 20 Hz ± 10 %, increasing frame numbers, plausible poses.
     let frames = &got.frames;
     assert!(frames.windows(2).all(|w| w[1].seq == w[0].seq + 1));
-    assert!(frames.windows(2).all(|w| w[1].frame_number > w[0].frame_number));
+    assert!(frames
+        .windows(2)
+        .all(|w| w[1].frame_number > w[0].frame_number));
     let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_t_ns).collect();
     let frame_rate = rate_hz(&arrivals);
-    assert!((18.0..=22.0).contains(&frame_rate), "tracker rate {frame_rate:.2} Hz");
+    assert!(
+        (18.0..=22.0).contains(&frame_rate),
+        "tracker rate {frame_rate:.2} Hz"
+    );
     let seen = frames.iter().filter(|f| f.tool(Tool::Base).is_ok()).count();
-    assert!(seen * 10 >= frames.len() * 9, "base seen in {seen} of {} frames", frames.len());
+    assert!(
+        seen * 10 >= frames.len() * 9,
+        "base seen in {seen} of {} frames",
+        frames.len()
+    );
     for frame in frames.iter().filter(|f| f.tool(Tool::Base).is_ok()) {
         let base = frame.tool(Tool::Base);
         let distance = norm(&base.position_mm);
-        assert!((500.0..=1500.0).contains(&distance), "base at {distance} mm");
+        assert!(
+            (500.0..=1500.0).contains(&distance),
+            "base at {distance} mm"
+        );
         assert!((norm(&base.quaternion) - 1.0).abs() < 1e-3);
         for tool in [Tool::Front, Tool::Back] {
             let sample = frame.tool(tool);
@@ -238,7 +266,11 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
                 let offset: Vec<f64> = (0..3)
                     .map(|i| sample.position_mm[i] - base.position_mm[i])
                     .collect();
-                assert!(norm(&offset) < 400.0, "{tool:?} {} mm from the base", norm(&offset));
+                assert!(
+                    norm(&offset) < 400.0,
+                    "{tool:?} {} mm from the base",
+                    norm(&offset)
+                );
             }
         }
     }
@@ -252,11 +284,34 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
             .get(&frame.frame_number)
             .unwrap_or_else(|| panic!("no truth for frame {}", frame.frame_number));
         let latency_ms = (frame.arrival_t_ns - t.exposure_t_ns) as f64 * 1e-6;
-        assert!((15.0..=100.0).contains(&latency_ms), "latency {latency_ms} ms");
+        assert!(
+            (15.0..=100.0).contains(&latency_ms),
+            "latency {latency_ms} ms"
+        );
         let from_home = norm(&[t.tip_mm[0], t.tip_mm[1] + 90.0, t.tip_mm[2] - 180.0]);
         assert!(from_home < 80.0, "true tip {:?}", t.tip_mm);
         assert!((norm(&t.direction) - 1.0).abs() < 1e-9);
     }
+
+    let latencies: Vec<f64> = frames
+        .iter()
+        .map(|f| (f.arrival_t_ns - truth[&f.frame_number].exposure_t_ns) as f64 * 1e-6)
+        .collect();
+    let max_from_home = frames
+        .iter()
+        .map(|f| {
+            let tip = truth[&f.frame_number].tip_mm;
+            norm(&[tip[0], tip[1] + 90.0, tip[2] - 180.0])
+        })
+        .fold(0.0, f64::max);
+    eprintln!(
+        "encoders {encoder_rate:.1} Hz ({} samples), tracker {frame_rate:.2} Hz ({} frames), \
+         latency {:.1}..{:.1} ms, true tip ≤ {max_from_home:.1} mm from home",
+        samples.len(),
+        frames.len(),
+        latencies.iter().copied().fold(f64::INFINITY, f64::min),
+        latencies.iter().copied().fold(0.0, f64::max),
+    );
 
     // Phases: homing announced after it ended; the plan waited for the sensors.
     let homing = got.phases[0];
@@ -273,12 +328,130 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     for node in [&mut tracker, &mut encoders, &mut rig] {
         let status = node.terminate(Duration::from_secs(5));
         let status = status.unwrap_or_else(|| panic!("{} ignored SIGTERM", node.name));
-        assert!(status.success(), "{}: {status:?}\n{}", node.name, node.log());
+        assert!(
+            status.success(),
+            "{}: {status:?}\n{}",
+            node.name,
+            node.log()
+        );
         assert!(!process_alive(node.child.id()));
     }
-    assert!(std::fs::symlink_metadata(&link).is_err(), "device path left behind");
+    assert!(
+        std::fs::symlink_metadata(&link).is_err(),
+        "device path left behind"
+    );
     drop(inputs);
     drop(rt);
+    drop(observer);
+    let left = sabr_node::release_domain(&domain);
+    assert!(left.is_empty(), "iceoryx2 files left: {left:?}");
+}
+
+/// Waits up to `timeout` for a process to exit on its own.
+fn wait_exit(node: &mut NodeProcess, timeout: Duration) -> Option<ExitStatus> {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        if let Ok(Some(status)) = node.child.try_wait() {
+            return Some(status);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    None
+}
+
+#[test]
+fn a_stalled_rig_is_noticed_by_encoders_and_tracker() {
+    let domain = test_domain("hw-stall");
+    assert!(
+        sabr_node::domain_files(&domain).is_empty(),
+        "domain not fresh"
+    );
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let link = dir.path().join("polaris-tty");
+    let observer = GraphObserver::new(&domain).expect("observer");
+    let rt = NodeRuntime::with_domain("hw-stall-test", domain.clone()).expect("test node");
+    let latches: Subscriber<sabr_msgs::CounterLatch> =
+        rt.subscriber(services::RIG_COUNTERS).unwrap();
+    let samples: Subscriber<EncoderSample> = rt.subscriber(services::ENCODER_SAMPLES).unwrap();
+    let frames: Subscriber<TrackerFrame> = rt.subscriber(services::TRACKER_FRAMES).unwrap();
+
+    let mut rig = NodeProcess::start("rig", "sabr-rig", &["--seed", "2"], &domain, dir.path());
+    let start = Instant::now();
+    while std::fs::symlink_metadata(&link).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(15), "{}", rig.log());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let encoder_args = ["--rig-timeout-ms", "500"];
+    let mut encoders = NodeProcess::start(
+        "encoders",
+        "sabr-encoders",
+        &encoder_args,
+        &domain,
+        dir.path(),
+    );
+    let port = link.to_string_lossy().into_owned();
+    let mut tracker = NodeProcess::start(
+        "tracker",
+        "sabr-tracker",
+        &["--port", &port],
+        &domain,
+        dir.path(),
+    );
+    // Both streams flowing.
+    let (mut got_sample, mut got_frame) = (false, false);
+    while !(got_sample && got_frame) {
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "{}\n{}",
+            encoders.log(),
+            tracker.log()
+        );
+        got_sample |= samples.latest().unwrap().is_some();
+        got_frame |= frames.latest().unwrap().is_some();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+
+    // The rig freezes: its register and its tracker stop answering.
+    kill(Pid::from_raw(rig.child.id() as i32), Signal::SIGSTOP).unwrap();
+    let encoders_status = wait_exit(&mut encoders, Duration::from_secs(5));
+    let tracker_status = wait_exit(&mut tracker, Duration::from_secs(5));
+    let last_latch = latches.latest().unwrap().expect("latches were published");
+    let mut after = Vec::new();
+    samples
+        .drain(|s| {
+            if s.t_ns > last_latch.latch_t_ns {
+                after.push(s.t_ns - last_latch.latch_t_ns);
+            }
+        })
+        .unwrap();
+    kill(Pid::from_raw(rig.child.id() as i32), Signal::SIGKILL).unwrap();
+    let _ = rig.child.wait();
+
+    // No sample claims counts older than the 10 ms staleness limit as fresh.
+    let worst = after.iter().copied().max().unwrap_or(0);
+    assert!(
+        worst <= 10_000_000,
+        "a sample {worst} ns after the last latch"
+    );
+    let status = encoders_status.expect("encoders still running with a dead rig");
+    assert!(!status.success(), "encoders: {status:?}");
+    assert!(
+        encoders.log().contains("the rig is dead"),
+        "{}",
+        encoders.log()
+    );
+    let status = tracker_status.expect("tracker still running with a dead rig");
+    assert!(!status.success(), "tracker: {status:?}");
+    assert!(
+        tracker.log().contains("the tracker is dead"),
+        "{}",
+        tracker.log()
+    );
+
+    // The dead rig's resources are reclaimed; nothing of the domain is left.
+    drop((latches, samples, frames));
+    drop(rt);
+    observer.cleanup_dead_nodes();
     drop(observer);
     let left = sabr_node::release_domain(&domain);
     assert!(left.is_empty(), "iceoryx2 files left: {left:?}");

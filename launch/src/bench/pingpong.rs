@@ -15,8 +15,13 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// Longest wait for one message before a side gives up (the peer hung or died).
+/// Longest wait of the pong for the next message before it gives up (the measuring process
+/// hung or died); longer than any idle window.
 pub const PEER_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Longest round trip before the measuring side gives up (the pong hung or died); the worst
+/// seen on a heavily loaded 2-core machine was below 0.1 s.
+const ROUND_TRIP_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// Longest wait for the pong process to start up (and to exit at the end).
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
@@ -125,7 +130,7 @@ fn run_uds(payload: Payload, plan: &Plan, socket_dir: &Path) -> anyhow::Result<P
         stream,
         payload.request_bytes(),
         payload.response_bytes(),
-        PEER_TIMEOUT,
+        ROUND_TRIP_TIMEOUT,
     )?;
     measure(Transport::Uds, payload, plan, peer, |_| {
         end.send()?;
@@ -144,17 +149,19 @@ fn measure(
 ) -> anyhow::Result<PingPong> {
     let name = baseline_name(transport, payload);
     for _ in 0..plan.warmup {
-        round_trip(Instant::now() + PEER_TIMEOUT).with_context(|| format!("{name}: warm-up"))?;
+        round_trip(Instant::now() + ROUND_TRIP_TIMEOUT)
+            .with_context(|| format!("{name}: warm-up"))?;
     }
     let mut round_trips = Measurement::new(name.clone(), "ns");
     for index in 0..plan.samples {
         let start = Instant::now();
-        round_trip(start + PEER_TIMEOUT).with_context(|| format!("{name}: round trip {index}"))?;
+        round_trip(start + ROUND_TRIP_TIMEOUT)
+            .with_context(|| format!("{name}: round trip {index}"))?;
         round_trips.record_duration(start.elapsed())?;
     }
     let pong_idle = measure_cpu_share(peer.pid(), plan.idle_window)
         .with_context(|| format!("{name}: idle CPU of the pong process"))?;
-    round_trip(Instant::now() + PEER_TIMEOUT)
+    round_trip(Instant::now() + ROUND_TRIP_TIMEOUT)
         .with_context(|| format!("{name}: last round trip"))?;
     peer.finish()?;
     Ok(PingPong {

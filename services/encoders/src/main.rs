@@ -92,9 +92,9 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
                 out.send(sample)?;
                 stats.sample(sampler.age_ns(now).unwrap_or(0), now);
                 if let Some(since) = stats.stale_since.take() {
-                    tracing::warn!(
+                    tracing::info!(
                         after_ms = (now - since) as f64 * 1e-6,
-                        skipped = stats.stale_instants,
+                        stale_instants = stats.stale_instants,
                         "counter register fresh again"
                     );
                 }
@@ -103,7 +103,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
                 stats.stale_instants += 1;
                 if stats.stale_since.is_none() {
                     stats.stale_since = Some(now);
-                    tracing::error!(
+                    tracing::warn!(
                         latch_seq,
                         age_ms = age_ns as f64 * 1e-6,
                         "the rig's counter register is stale (rig stalled or dead): not sampling"

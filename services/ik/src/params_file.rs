@@ -86,7 +86,10 @@ mod tests {
         let error = load_params(&corrupt).unwrap_err();
         assert!(matches!(error, ParamsFileError::Invalid { .. }));
         let text = error.to_string();
-        assert!(text.contains("params.toml") && text.contains("line 2"), "{text}");
+        assert!(
+            text.contains("params.toml") && text.contains("line 2"),
+            "{text}"
+        );
 
         let good = dir.path().join("robot.toml");
         std::fs::write(&good, RobotParams::nominal().to_toml_string()).unwrap();

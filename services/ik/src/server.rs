@@ -30,7 +30,8 @@ pub struct ServeCounts {
 pub fn serve(rt: &mut NodeRuntime, solver: &mut IkSolver) -> Result<ServeCounts, NodeError> {
     let server = rt.server::<IkRequest, IkResponse>(services::IK_SOLVE)?;
     let wakeups = rt.listener(services::IK_SOLVE)?;
-    let announcements = rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
+    let announcements =
+        rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
     let waitset = WaitSetBuilder::new()
         .create::<ipc::Service>()
         .map_err(|e| port_error("create a WaitSet", e))?;
@@ -113,7 +114,11 @@ fn apply_announcements(
             tracing::info!(version, path = %announcement.path, "parameter set in service");
         }
         Ok(ReloadOutcome::Ignored { announced, current }) => {
-            tracing::info!(announced, current, "announced parameter set is not newer; ignored");
+            tracing::info!(
+                announced,
+                current,
+                "announced parameter set is not newer; ignored"
+            );
         }
         Err(error) => {
             let kept = solver.parameters().map(|set| set.version);

@@ -182,8 +182,7 @@ mod tests {
             assert_eq!(response.status, IkStatus::Ok, "{}", response.error);
             assert_eq!(response.id, 17);
             assert_eq!(response.parameter_version, 3);
-            let expected =
-                inverse(&geometry, &pose.tip, &pose.direction, &HOME_JOINTS).unwrap();
+            let expected = inverse(&geometry, &pose.tip, &pose.direction, &HOME_JOINTS).unwrap();
             assert_eq!(response.joints_rad, expected);
             let counts = params
                 .counts_from_joints(&expected, &JointMotion::default())
@@ -200,17 +199,45 @@ mod tests {
     fn invalid_and_unreachable_targets_get_errors_with_reasons() {
         let solver = solver(calibrated());
         let cases = [
-            (request([f64::NAN, -90.0, 180.0], [0.0, 0.0, 1.0]), IkStatus::InvalidInput, "tip"),
-            (request([0.0, f64::INFINITY, 180.0], [0.0, 0.0, 1.0]), IkStatus::InvalidInput, "tip"),
-            (request([0.0, -90.0, 180.0], [0.0, f64::NAN, 1.0]), IkStatus::InvalidInput, "direction"),
-            (request([0.0, -90.0, 180.0], [0.0, 0.0, 0.0]), IkStatus::InvalidInput, "zero length"),
-            (request([0.0, -90.0, 900.0], [0.0, 0.0, 1.0]), IkStatus::Unreachable, "unreachable"),
-            (request([0.0, -90.0, 180.0], [1.0, 0.0, 0.0]), IkStatus::Unreachable, "unreachable"),
+            (
+                request([f64::NAN, -90.0, 180.0], [0.0, 0.0, 1.0]),
+                IkStatus::InvalidInput,
+                "tip",
+            ),
+            (
+                request([0.0, f64::INFINITY, 180.0], [0.0, 0.0, 1.0]),
+                IkStatus::InvalidInput,
+                "tip",
+            ),
+            (
+                request([0.0, -90.0, 180.0], [0.0, f64::NAN, 1.0]),
+                IkStatus::InvalidInput,
+                "direction",
+            ),
+            (
+                request([0.0, -90.0, 180.0], [0.0, 0.0, 0.0]),
+                IkStatus::InvalidInput,
+                "zero length",
+            ),
+            (
+                request([0.0, -90.0, 900.0], [0.0, 0.0, 1.0]),
+                IkStatus::Unreachable,
+                "unreachable",
+            ),
+            (
+                request([0.0, -90.0, 180.0], [1.0, 0.0, 0.0]),
+                IkStatus::Unreachable,
+                "unreachable",
+            ),
         ];
         for (req, status, reason) in cases {
             let response = solver.solve(&req);
             assert_eq!(response.status, status, "{req:?}: {}", response.error);
-            assert!(response.error.as_str().contains(reason), "{}", response.error);
+            assert!(
+                response.error.as_str().contains(reason),
+                "{}",
+                response.error
+            );
             assert_eq!(response.joints_rad, [0.0; 5]);
             assert_eq!(response.counts, [0.0; 5]);
         }
@@ -226,7 +253,11 @@ mod tests {
         assert_eq!(response.status, IkStatus::NoParameters);
         let response = solver(RobotParams::nominal()).solve(&home);
         assert_eq!(response.status, IkStatus::NoParameters);
-        assert!(response.error.as_str().contains("offsets"), "{}", response.error);
+        assert!(
+            response.error.as_str().contains("offsets"),
+            "{}",
+            response.error
+        );
     }
 
     #[test]

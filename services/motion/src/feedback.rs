@@ -30,11 +30,6 @@ impl FeedbackWatch {
         self.last_ns.is_some()
     }
 
-    /// Host time of the last data, if any arrived.
-    pub fn last_ns(&self) -> Option<i64> {
-        self.last_ns
-    }
-
     /// Why the stream is stale at `now_ns` (no data for longer than the deadline since the
     /// last data), or `None` while it is fresh or before any data arrived.
     pub fn stale(&self, now_ns: i64) -> Option<String> {
@@ -70,7 +65,7 @@ mod tests {
         assert_eq!(watch.stale(149 * MS), None);
         // Data stamped out of order never moves the last arrival back.
         watch.feed(125 * MS);
-        assert_eq!(watch.last_ns(), Some(130 * MS));
+        assert_eq!(watch.stale(150 * MS), None);
         assert!(watch.stale(151 * MS).unwrap().contains("21.0 ms"));
     }
 }

@@ -187,9 +187,7 @@ impl Homing {
 /// joints are the nominal stops.
 pub fn offsets_from_stops(params: &RobotParams, stop_counts: &Counts) -> Joints {
     let motor = params.motor_angles(stop_counts);
-    std::array::from_fn(|i| {
-        params.joints.home_stops[i] - params.joints.gear_ratio[i] * motor[i]
-    })
+    std::array::from_fn(|i| params.joints.home_stops[i] - params.joints.gear_ratio[i] * motor[i])
 }
 
 #[cfg(test)]
@@ -203,7 +201,8 @@ mod tests {
 
     fn true_robot(seed: u64) -> TrueRobot {
         let nominal = RobotParams::nominal();
-        let centre = sabr_sim::excitation_centre(&nominal.joints.home_stops, &sabr_model::HOME_JOINTS);
+        let centre =
+            sabr_sim::excitation_centre(&nominal.joints.home_stops, &sabr_model::HOME_JOINTS);
         let truth = RobotTruth::sample(
             &nominal,
             &Perturbation::default(),
@@ -229,7 +228,8 @@ mod tests {
             let step = homing.step(t, robot.counts());
             match &step {
                 HomingStep::Approach(target) | HomingStep::Dwell(target) => {
-                    let motor: Joints = std::array::from_fn(|i| target[i] * TAU / f64::from(cpr[i]));
+                    let motor: Joints =
+                        std::array::from_fn(|i| target[i] * TAU / f64::from(cpr[i]));
                     robot.command(t, &motor);
                 }
                 _ => return (step, robot, steps),
@@ -260,7 +260,10 @@ mod tests {
             let truth = robot.truth();
             let joints = robot.paper_joints();
             for i in 0..JOINT_COUNT {
-                assert!((joints[i] - truth.stops[i]).abs() < 1e-3, "seed {seed} joint {i}");
+                assert!(
+                    (joints[i] - truth.stops[i]).abs() < 1e-3,
+                    "seed {seed} joint {i}"
+                );
             }
             // The offsets map the stop counts to the nominal stops.
             let mut params = RobotParams::nominal();

@@ -205,7 +205,9 @@ mod tests {
         assert_eq!(refusal.segment, "excitation");
         assert!(refusal.reason.contains("joint 4") && refusal.reason.contains("upper"));
         assert!((refusal.t_s - (crossing - 1) as f64 * PERIOD_S).abs() < 1.5 * PERIOD_S);
-        assert!(refusal.to_string().starts_with("plan refused before moving: excitation"));
+        assert!(refusal
+            .to_string()
+            .starts_with("plan refused before moving: excitation"));
     }
 
     #[test]
@@ -219,7 +221,11 @@ mod tests {
         let mut fast = start;
         fast[0] += 1.01 * step;
         let refusal = check_plan(&limits, &start, &[segment("move", vec![fast])]).unwrap_err();
-        assert!(refusal.reason.contains("joint 1 moves at"), "{}", refusal.reason);
+        assert!(
+            refusal.reason.contains("joint 1 moves at"),
+            "{}",
+            refusal.reason
+        );
         // A jump between two segments is a step too.
         let refusal = check_plan(
             &limits,

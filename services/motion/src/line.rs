@@ -68,16 +68,27 @@ impl LineSpec {
 
     /// Checks the numbers: finite, positive length and speed, non-negative dwell.
     pub fn validate(&self) -> Result<(), String> {
-        if !self.start.coords.iter().chain(self.direction.iter()).all(|v| v.is_finite()) {
+        if !self
+            .start
+            .coords
+            .iter()
+            .chain(self.direction.iter())
+            .all(|v| v.is_finite())
+        {
             return Err("the line's start and direction must be finite".into());
         }
         for (name, value) in [("length", self.length_mm), ("speed", self.speed_mm_s)] {
             if !(value.is_finite() && value > 0.0) {
-                return Err(format!("the line {name} must be a positive number, got {value}"));
+                return Err(format!(
+                    "the line {name} must be a positive number, got {value}"
+                ));
             }
         }
         if !(self.dwell_s.is_finite() && self.dwell_s >= 0.0) {
-            return Err(format!("the line dwell must be ≥ 0 s, got {}", self.dwell_s));
+            return Err(format!(
+                "the line dwell must be ≥ 0 s, got {}",
+                self.dwell_s
+            ));
         }
         Ok(())
     }
@@ -308,7 +319,11 @@ mod tests {
         )))
     }
 
-    fn plan_line(spec: &LineSpec, ik: &mut LocalIk, version: u64) -> Result<Vec<SolvedWaypoint>, String> {
+    fn plan_line(
+        spec: &LineSpec,
+        ik: &mut LocalIk,
+        version: u64,
+    ) -> Result<Vec<SolvedWaypoint>, String> {
         let mut planner = LinePlanner::new(spec, version, HOME_JOINTS, 0);
         let mut now = 0;
         loop {
@@ -323,8 +338,9 @@ mod tests {
     fn default_line_is_straight_reachable_and_within_the_default_limits() {
         let params = calibrated();
         let geometry = params.effective_geometry();
-        let spec = LineSpec::centred_insertion(&geometry, &params.joints.home_stops, 20.0, 5.0, 0.5)
-            .unwrap();
+        let spec =
+            LineSpec::centred_insertion(&geometry, &params.joints.home_stops, 20.0, 5.0, 0.5)
+                .unwrap();
         let waypoints = plan_line(&spec, &mut local_ik(&params, 2), 2).unwrap();
         assert_eq!(waypoints.len(), spec.waypoints().len());
         // Start from the stops (as after homing) and play the whole plan through the check.
@@ -360,7 +376,10 @@ mod tests {
         assert_eq!(counts[dwell - 1 + WAYPOINT_PERIODS], waypoints[1].counts);
         // The approach starts next to the stops and ends at the first waypoint exactly.
         let approach = &segments[0];
-        assert_eq!(approach.counts.as_ref().unwrap().last(), Some(&waypoints[0].counts));
+        assert_eq!(
+            approach.counts.as_ref().unwrap().last(),
+            Some(&waypoints[0].counts)
+        );
         assert!(approach.duration_s() >= MIN_APPROACH_S);
     }
 
@@ -385,7 +404,10 @@ mod tests {
             .unwrap();
         let mut old_server = local_ik(&params, 1);
         let mut planner = LinePlanner::new(&spec, 2, HOME_JOINTS, 0);
-        assert_eq!(planner.advance(&mut old_server, 1_000, 5).unwrap(), PlannerStep::Pending);
+        assert_eq!(
+            planner.advance(&mut old_server, 1_000, 5).unwrap(),
+            PlannerStep::Pending
+        );
         let reason = planner
             .advance(&mut old_server, VERSION_WAIT_NS + 1, 5)
             .unwrap_err();

@@ -114,7 +114,11 @@ pub fn calibration_segments(
     let phases = plan.phases().iter().filter(|p| p.start_ns >= start_ns);
     for phase in phases {
         if phase.start_ns > t {
-            segments.push(segment(TRANSITION, false, sample(&plan, t, phase.start_ns, false)));
+            segments.push(segment(
+                TRANSITION,
+                false,
+                sample(&plan, t, phase.start_ns, false),
+            ));
         }
         let last = phase.end_ns >= end_ns;
         let joints = sample(&plan, phase.start_ns, phase.end_ns, last);

@@ -96,7 +96,11 @@ fn run(args: &Args) -> anyhow::Result<()> {
             }
             Err(error) if !rt.keep_running() => {
                 // Stopping anyway (e.g. the whole graph at once): the device went first.
-                tracing::info!(published, bad_replies, "stop requested; tracker gone: {error}");
+                tracing::info!(
+                    published,
+                    bad_replies,
+                    "stop requested; tracker gone: {error}"
+                );
                 return Ok(());
             }
             Err(error) => {
