@@ -26,10 +26,7 @@ const NODES: [&str; 5] = ["rig", "encoders", "tracker", "sync", "recorder"];
 
 /// The shipped launch file with the `[[node]]` sections of `nodes` made `required = false`.
 fn with_optional(nodes: &[&str]) -> String {
-    let mut sections: Vec<String> = SHIPPED
-        .split("[[node]]")
-        .map(str::to_owned)
-        .collect();
+    let mut sections: Vec<String> = SHIPPED.split("[[node]]").map(str::to_owned).collect();
     for node in nodes {
         let section = sections
             .iter_mut()
@@ -101,7 +98,9 @@ fn first_of_new_publisher<T: Message>(
 ) -> Option<Instant> {
     while Instant::now() < deadline {
         let left = deadline.saturating_duration_since(Instant::now());
-        let Some(sample) = stream.recv_timeout(left.min(Duration::from_millis(20))).unwrap()
+        let Some(sample) = stream
+            .recv_timeout(left.min(Duration::from_millis(20)))
+            .unwrap()
         else {
             continue;
         };
@@ -177,16 +176,22 @@ fn killed_sync_is_restarted_and_matched_samples_flow_again_within_2_s() {
     let victim = pid_of(&mut graph, "sync");
 
     let killed = sigkill(victim);
-    let fresh = first_of_new_publisher(&probe.matched, |m| m.seq, last, killed + RECOVERY);
+    // Waits past the goal to report how long the recovery actually took.
+    let fresh = first_of_new_publisher(&probe.matched, |m| m.seq, last, killed + LONG);
     let restarted = graph.wait_ready("sync", Some(victim), Duration::ZERO);
-    assert!(restarted.is_some(), "sync not restarted:\n{}", graph.output());
-    let fresh = fresh.unwrap_or_else(|| {
-        panic!(
-            "no matched sample from the restarted sync within {RECOVERY:?}:\n{}",
-            graph.output()
-        )
-    });
-    eprintln!("sync recovered {:?} after SIGKILL", fresh - killed);
+    assert!(
+        restarted.is_some(),
+        "sync not restarted:\n{}",
+        graph.output()
+    );
+    let recovered = fresh.map(|t| t - killed);
+    eprintln!("sync recovered {recovered:?} after SIGKILL");
+    assert!(
+        recovered.is_some_and(|r| r < RECOVERY),
+        "the restarted sync published its first matched sample {recovered:?} after SIGKILL \
+         (goal {RECOVERY:?}):\n{}",
+        graph.output()
+    );
     assert!(!process_alive(victim));
     stop_cleanly(graph, probe);
 }
@@ -238,11 +243,46 @@ fn killed_encoders_are_restarted_and_samples_flow_again_within_2_s() {
         )
     });
     eprintln!("encoders recovered {:?} after SIGKILL", fresh - killed);
-    assert!(graph.wait_ready("encoders", Some(victim), LONG).is_some());
-    // The rest of the graph kept running: sync still matches frames afterwards.
-    let matched = flowing(&probe.matched, |m| m.seq, Duration::from_secs(1));
-    let after = flowing(&probe.matched, |m| m.seq, RECOVERY);
-    assert!(after > matched, "sync stopped matching after the encoders restarted");
+    let restarted = graph
+        .wait_ready("encoders", Some(victim), LONG)
+        .expect("ready")
+        .pid;
+    // The new process's samples follow each other without a gap.
+    let mut check = probe
+        .encoders
+        .recv_timeout(LONG)
+        .unwrap()
+        .expect("a sample")
+        .seq;
+    let until = Instant::now() + Duration::from_millis(500);
+    while Instant::now() < until {
+        if let Some(sample) = probe
+            .encoders
+            .recv_timeout(Duration::from_millis(20))
+            .unwrap()
+        {
+            assert_eq!(sample.seq, check + 1, "gap after the restart");
+            check = sample.seq;
+        }
+    }
+    // Only the killed node was restarted.
+    for node in NODES {
+        let pids: Vec<u32> = graph
+            .seen()
+            .iter()
+            .filter(|m| m.node.as_str() == node)
+            .map(|m| m.pid)
+            .collect();
+        let expected: &[u32] = if node == "encoders" {
+            &[victim, restarted]
+        } else {
+            &pids[..1]
+        };
+        assert!(
+            pids.iter().all(|p| expected.contains(p)),
+            "{node} restarted: {pids:?}"
+        );
+    }
     stop_cleanly(graph, probe);
 }
 
@@ -278,7 +318,10 @@ fn a_required_node_dying_stops_the_graph_cleanly_with_failure() {
     let status = graph
         .wait_exit(LONG)
         .unwrap_or_else(|| panic!("the launcher did not stop:\n{}", graph.output()));
-    eprintln!("graph stopped {:?} after the rig was killed", killed.elapsed());
+    eprintln!(
+        "graph stopped {:?} after the rig was killed",
+        killed.elapsed()
+    );
     let output = graph.output();
     assert_eq!(status.code(), Some(1), "{output}");
     assert!(
@@ -288,8 +331,5 @@ fn a_required_node_dying_stops_the_graph_cleanly_with_failure() {
     for (node, pid) in NODES.iter().zip(&pids) {
         assert!(!process_alive(*pid), "{node} (pid {pid}) still alive");
     }
-    // The launcher released the domain by itself.
-    let left = sabr_node::domain_files(&graph.domain);
-    assert!(left.is_empty(), "iceoryx2 files left: {left:?}");
     assert_nothing_left(&mut graph);
 }

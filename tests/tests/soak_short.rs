@@ -75,13 +75,22 @@ fn a_short_soak_loses_no_encoder_sample_and_memory_stays_bounded() {
     assert_eq!(number(last, "encoder_lost"), 0.0, "{stdout}");
     assert_eq!(number(last, "encoder_restarts"), 0.0, "{stdout}");
     let samples = number(last, "encoder_samples");
-    assert!(samples >= 0.9 * 1000.0 * WINDOW_S, "{samples} encoder samples\n{stdout}");
+    assert!(
+        samples >= 0.9 * 1000.0 * WINDOW_S,
+        "{samples} encoder samples\n{stdout}"
+    );
     let frames = number(last, "tracker_frames");
-    assert!(frames >= 0.9 * 20.0 * WINDOW_S, "{frames} tracker frames\n{stdout}");
+    assert!(
+        frames >= 0.9 * 20.0 * WINDOW_S,
+        "{frames} tracker frames\n{stdout}"
+    );
 
     // Memory: every process's RSS once warmed up against its largest later value.
     let readings = csv(&out.path().join("soak.csv"));
-    let end_s = readings.iter().map(|r| number(r, "t_s")).fold(0.0, f64::max);
+    let end_s = readings
+        .iter()
+        .map(|r| number(r, "t_s"))
+        .fold(0.0, f64::max);
     let warm_s = end_s - (WINDOW_S - WARM_UP_S);
     let mut per_process: BTreeMap<String, (Option<u64>, u64)> = BTreeMap::new();
     for row in &readings {
@@ -95,7 +104,10 @@ fn a_short_soak_loses_no_encoder_sample_and_memory_stays_bounded() {
     }
     let processes: Vec<&str> = readings.iter().map(|r| r["process"].as_str()).collect();
     for node in ["launcher", "rig", "encoders", "tracker", "sync", "recorder"] {
-        assert!(processes.contains(&node), "{node} never read: {processes:?}");
+        assert!(
+            processes.contains(&node),
+            "{node} never read: {processes:?}"
+        );
     }
     for (process, (warm, max)) in per_process {
         let growth = max.saturating_sub(warm.unwrap_or(max));

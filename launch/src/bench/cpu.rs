@@ -51,17 +51,35 @@ pub fn ticks_per_second() -> anyhow::Result<u64> {
 
 /// The CPU use of process `pid` over the next `window` (this call sleeps that long).
 pub fn measure_cpu_share(pid: u32, window: Duration) -> anyhow::Result<CpuShare> {
+    let shares = measure_cpu_shares(&[pid], window)?;
+    Ok(shares[0])
+}
+
+/// The CPU use of each of `pids` over the same next `window`, in the order given (this call
+/// sleeps that long).
+pub fn measure_cpu_shares(pids: &[u32], window: Duration) -> anyhow::Result<Vec<CpuShare>> {
     let ticks_per_second = ticks_per_second()? as f64;
-    let before = cpu_ticks(pid)?;
+    let before = pids
+        .iter()
+        .map(|&pid| cpu_ticks(pid))
+        .collect::<anyhow::Result<Vec<u64>>>()?;
     let started = Instant::now();
     std::thread::sleep(window);
-    let after = cpu_ticks(pid)?;
-    let elapsed = started.elapsed().as_secs_f64();
-    Ok(CpuShare {
-        cores: after.saturating_sub(before) as f64 / ticks_per_second / elapsed,
-        resolution: 1.0 / ticks_per_second / elapsed,
-        window: started.elapsed(),
-    })
+    let after = pids
+        .iter()
+        .map(|&pid| cpu_ticks(pid))
+        .collect::<anyhow::Result<Vec<u64>>>()?;
+    let elapsed = started.elapsed();
+    let seconds = elapsed.as_secs_f64();
+    Ok(before
+        .iter()
+        .zip(&after)
+        .map(|(before, after)| CpuShare {
+            cores: after.saturating_sub(*before) as f64 / ticks_per_second / seconds,
+            resolution: 1.0 / ticks_per_second / seconds,
+            window: elapsed,
+        })
+        .collect())
 }
 
 #[cfg(test)]

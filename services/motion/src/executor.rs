@@ -522,7 +522,7 @@ impl Executor {
         let spec = match line.start_and_direction {
             Some((start, direction)) => {
                 let direction = nalgebra::Vector3::from(direction);
-                if !(direction.norm() > 0.0) {
+                if direction.norm() <= 0.0 || direction.norm().is_nan() {
                     return Err("line refused: its direction has zero length".into());
                 }
                 let spec = LineSpec {

@@ -57,6 +57,8 @@ fn config() -> ExecutorConfig {
 struct Rig {
     robot: TrueRobot,
     cpr: [u32; 5],
+    /// From the excitation on: the closest any joint came to its true stop (rad).
+    closest_to_stop_from_excitation: Option<f64>,
 }
 
 impl Rig {
@@ -74,6 +76,7 @@ impl Rig {
         Self {
             robot: TrueRobot::new(truth),
             cpr: nominal.joints.counts_per_rev,
+            closest_to_stop_from_excitation: None,
         }
     }
 
@@ -87,6 +90,16 @@ impl Rig {
                 let motor: Joints =
                     std::array::from_fn(|i| target[i] * TAU / f64::from(self.cpr[i]));
                 self.robot.command(t_ns, &motor);
+                if let Some(closest) = &mut self.closest_to_stop_from_excitation {
+                    let q = self.robot.paper_joints();
+                    let stops = self.robot.truth().stops;
+                    for (joint, stop) in q.iter().zip(&stops) {
+                        *closest = closest.min((joint - stop).abs());
+                    }
+                }
+            }
+            if matches!(event, Event::Status { reason, .. } if reason == "excitation") {
+                self.closest_to_stop_from_excitation = Some(f64::INFINITY);
             }
         }
     }
@@ -270,16 +283,11 @@ fn a_calibration_session_homes_then_plays_the_phases_and_finishes() {
     // A setpoint every period while moving, never two in one period.
     let times: Vec<i64> = setpoints(&events).iter().map(|(t, _)| *t).collect();
     assert!(times.windows(2).all(|w| w[1] > w[0]));
-    // After homing, the true robot never touches a stop and follows the plan: the true
-    // joints stay inside the default limits widened by the gear-ratio and stop errors.
-    let truth = rig.robot.truth().clone();
-    let q = rig.robot.paper_joints();
-    for i in 0..5 {
-        assert!(
-            (q[i] - truth.stops[i]).abs() > 0.01,
-            "joint {i} ends at its stop"
-        );
-    }
+    // With the homing offsets, the excitation, tip and validation phases keep every true
+    // joint off its true stop (their envelope ends 0.06 rad short of the nominal stops; the
+    // true stops differ by up to 2°, the gear ratios by 3 %).
+    let closest = rig.closest_to_stop_from_excitation.expect("excitation ran");
+    assert!(closest > 0.002, "came within {closest} rad of a stop");
 }
 
 #[test]

@@ -259,11 +259,8 @@ mod tests {
             // Every joint is at its true stop.
             let truth = robot.truth();
             let joints = robot.paper_joints();
-            for i in 0..JOINT_COUNT {
-                assert!(
-                    (joints[i] - truth.stops[i]).abs() < 1e-3,
-                    "seed {seed} joint {i}"
-                );
+            for (i, (joint, stop)) in joints.iter().zip(&truth.stops).enumerate() {
+                assert!((joint - stop).abs() < 1e-3, "seed {seed} joint {i}");
             }
             // The offsets map the stop counts to the nominal stops.
             let mut params = RobotParams::nominal();
@@ -271,8 +268,8 @@ mod tests {
             let q = params
                 .joints_from_counts(&stop_counts, &JointMotion::default())
                 .unwrap();
-            for i in 0..JOINT_COUNT {
-                assert!((q[i] - params.joints.home_stops[i]).abs() < 1e-12);
+            for (joint, stop) in q.iter().zip(&params.joints.home_stops) {
+                assert!((joint - stop).abs() < 1e-12);
             }
             // No commanded step towards a stop is faster than the homing speed (a stalled
             // joint's command falls back to its encoder), and the robot dwelt.

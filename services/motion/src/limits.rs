@@ -128,9 +128,7 @@ pub fn check_plan(
                 reason,
             };
             limits.check_pose(q).map_err(refuse)?;
-            limits
-                .check_step(&previous, q, PERIOD_S)
-                .map_err(|reason| refuse(reason))?;
+            limits.check_step(&previous, q, PERIOD_S).map_err(refuse)?;
             previous = *q;
         }
     }

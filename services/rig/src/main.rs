@@ -84,7 +84,8 @@ struct Args {
     /// Start the plan this long after the nodes of `--autoplay-after` are ready, s.
     #[arg(long, value_name = "S", default_value_t = 0.0, requires = "autoplay")]
     autoplay_delay_s: f64,
-    /// Announce the graph's job done 1 s after the plan ends.
+    /// Announce the graph's job done 1 s after the plan ends (the rig then holds the last pose
+    /// until it is stopped).
     #[arg(long, requires = "autoplay")]
     finish_when_done: bool,
     /// When the tip sphere is on the needle.
@@ -187,16 +188,26 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
     }
     rt.ready();
     let finish_when_done = args.finish_when_done;
-    let exit = rt.run_loop(period, |ctx| {
-        let over = live.tick(monotonic_ns())?;
-        if !port.is_serving() {
-            bail!("the tracker's pseudo-terminal is no longer served");
+    let mut done_announced = false;
+    // After announcing the job done the rig goes on (holding the last pose, serving counters
+    // and tracker) until the launcher stops the graph, so the others stop in order.
+    let exit = loop {
+        let exit = rt.run_loop(period, |ctx| {
+            let over = live.tick(monotonic_ns())?;
+            if !port.is_serving() {
+                bail!("the tracker's pseudo-terminal is no longer served");
+            }
+            if over && finish_when_done && !done_announced {
+                done_announced = true;
+                ctx.finish_graph();
+            }
+            Ok::<_, anyhow::Error>(())
+        });
+        match exit {
+            Ok(Exit::Done) => tracing::info!("job done announced; running until stopped"),
+            other => break other,
         }
-        if over && finish_when_done {
-            ctx.finish_graph();
-        }
-        Ok::<_, anyhow::Error>(())
-    });
+    };
     let stats = port.finish();
     tracing::info!(
         robot_s = live.sim.time_ns() as f64 * 1e-9,

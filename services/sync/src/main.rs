@@ -8,7 +8,7 @@ use anyhow::{bail, Context};
 use clap::Parser;
 use sabr_msgs::{services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame};
 use sabr_node::{monotonic_ns, Deadline, NodeRuntime};
-use sabr_sync::clock::ClockConfig;
+use sabr_sync::clock::{ClockConfig, ClockEstimate};
 use sabr_sync::encoder_buffer::Pushed;
 use sabr_sync::latency::{self, LatencySetting, ParameterSet};
 use sabr_sync::matcher::{MatchStats, Matcher, MatcherConfig, Unmatched};
@@ -35,7 +35,7 @@ struct Args {
     #[arg(long, value_name = "N", default_value_t = 1200)]
     window_frames: usize,
     /// Publish only once the clock line's predicted uncertainty is at most this, µs.
-    #[arg(long, value_name = "US", default_value_t = 150.0)]
+    #[arg(long, value_name = "US", default_value_t = 200.0)]
     max_clock_uncertainty_us: f64,
     /// Largest gap between the two encoder samples interpolated between, ms.
     #[arg(long, value_name = "MS", default_value_t = 5.0)]
@@ -186,7 +186,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
         frames.drain(|frame| {
             watch.tracker.feed();
             let result = matcher.push_frame(frame, setting.current(), now);
-            watch.frame_admitted(frame.frame_number, result);
+            watch.frame_admitted(frame.frame_number, result, matcher.last_clock());
         })?;
         let mut send = Ok(());
         matcher.poll(monotonic_ns(), |result| match result {
@@ -237,6 +237,7 @@ struct Watch {
     encoders_stalled: bool,
     tracker_stalled: bool,
     locked: bool,
+    clock: Option<ClockEstimate>,
     warned_drop: bool,
     last_status: Instant,
     last_stats: MatchStats,
@@ -250,18 +251,28 @@ impl Watch {
             encoders_stalled: false,
             tracker_stalled: false,
             locked: false,
+            clock: None,
             warned_drop: false,
             last_status: Instant::now(),
             last_stats: MatchStats::default(),
         }
     }
 
-    fn frame_admitted(&mut self, frame_number: u32, result: Result<(), Unmatched>) {
+    fn frame_admitted(
+        &mut self,
+        frame_number: u32,
+        result: Result<(), Unmatched>,
+        clock: Option<ClockEstimate>,
+    ) {
+        self.clock = clock.or(self.clock);
         match result {
             Ok(()) if !self.locked => {
                 self.locked = true;
                 tracing::info!(
                     frame_number,
+                    frames = clock.map(|c| c.frames),
+                    spread_us = clock.map(|c| (c.spread_ns * 1e-3).round()),
+                    uncertainty_us = clock.map(|c| (c.uncertainty_ns * 1e-3).round()),
                     "frame clock locked: publishing matched samples"
                 );
             }
@@ -320,6 +331,10 @@ impl Watch {
                 gaps = stats.gaps - last.gaps,
                 too_old = stats.too_old - last.too_old,
                 encoder_lost = stats.encoder_lost - last.encoder_lost,
+                clock_frames = self.clock.map(|c| c.frames),
+                clock_spread_us = self.clock.map(|c| (c.spread_ns * 1e-3).round()),
+                clock_uncertainty_us = self.clock.map(|c| (c.uncertainty_ns * 1e-3).round()),
+                clock_period_ns = self.clock.map(|c| c.period_ns.round()),
                 "status (last {} s)",
                 STATUS_PERIOD.as_secs()
             );

@@ -29,14 +29,15 @@ pub struct MatcherConfig {
 }
 
 impl Default for MatcherConfig {
-    /// 3 s of 1 kHz samples, 5 ms span, 100 ms wait, 150 µs clock uncertainty.
+    /// 3 s of 1 kHz samples, 5 ms span, 100 ms wait, 200 µs clock uncertainty (an error
+    /// p99 ≤ 0.5 ms for Gaussian errors).
     fn default() -> Self {
         Self {
             clock: ClockConfig::default(),
             buffer_samples: 3000,
             max_span_ns: 5_000_000,
             match_timeout_ns: 100_000_000,
-            max_uncertainty_ns: 150_000.0,
+            max_uncertainty_ns: 200_000.0,
         }
     }
 }
@@ -118,6 +119,7 @@ pub struct Matcher {
     counts_per_rev: [u32; JOINTS],
     seq: u64,
     stats: MatchStats,
+    last_clock: Option<ClockEstimate>,
 }
 
 impl Matcher {
@@ -131,6 +133,7 @@ impl Matcher {
             counts_per_rev,
             seq: 0,
             stats: MatchStats::default(),
+            last_clock: None,
         }
     }
 
@@ -142,6 +145,11 @@ impl Matcher {
     /// What happened so far.
     pub fn stats(&self) -> MatchStats {
         self.stats
+    }
+
+    /// The clock line at the newest frame that had one.
+    pub fn last_clock(&self) -> Option<ClockEstimate> {
+        self.last_clock
     }
 
     /// Frames waiting for encoder data.
@@ -195,6 +203,7 @@ impl Matcher {
             }
             Observed::Estimate(estimate) => estimate,
         };
+        self.last_clock = Some(clock);
         if clock.uncertainty_ns > self.config.max_uncertainty_ns {
             return Err(Unmatched::Converging {
                 uncertainty_ns: clock.uncertainty_ns,
@@ -363,11 +372,11 @@ mod tests {
 
     #[test]
     fn nothing_is_published_before_the_clock_converges() {
-        // With 1 ms of jitter the line needs ~180 frames for 150 µs of predicted uncertainty.
+        // With 1 ms of jitter the line needs ~100 frames for 200 µs of predicted uncertainty.
         let (matched, stats) = session(1, 20);
         let first = matched.first().expect("matched after convergence").0;
-        assert!(first.quality.clock_frames >= 100, "{first:?}");
-        assert!(stats.converging >= 99, "{stats:?}");
+        assert!(first.quality.clock_frames >= 70, "{first:?}");
+        assert!(stats.converging >= 69, "{stats:?}");
         assert_eq!(stats.matched as usize, matched.len());
     }
 

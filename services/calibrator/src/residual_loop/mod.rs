@@ -124,8 +124,11 @@ struct Round {
 
 impl Round {
     fn new(fit: &JointFit, pool: Vec<Candidate>) -> Self {
+        let t = std::time::Instant::now();
         let columns = candidate_columns(fit, &pool);
+        tracing::debug!(elapsed_s = t.elapsed().as_secs_f64(), "TMP columns");
         let design = Design::new(fit, &columns.columns);
+        tracing::debug!(elapsed_s = t.elapsed().as_secs_f64(), "TMP design");
         let mut next = 0;
         let ranges = pool
             .iter()
@@ -323,6 +326,7 @@ pub fn discover(
     rest_noise: &NoiseModel,
     rest_frames: usize,
 ) -> Result<(JointFit, Discovery), CalibrationError> {
+    let started = std::time::Instant::now();
     let mut fit = paper;
     let mut current = step_metrics("paper model", &fit, session, rest_noise, rest_frames);
     let mut steps = vec![StepSummary::of(&current)];
@@ -348,6 +352,7 @@ pub fn discover(
                 }))
                 .collect();
         let round = Round::new(&fit, pool);
+        tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "candidates scored");
         if plots.before.is_none() {
             plots.before = Some(picture(
                 "paper model",
@@ -444,6 +449,7 @@ pub fn discover(
         verdict,
         plots,
     };
+    tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "residual loop");
     Ok((
         fit,
         Discovery {

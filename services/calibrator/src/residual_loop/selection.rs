@@ -97,11 +97,12 @@ impl Design {
             .map(|f| {
                 let rows: Vec<usize> = (0..fit.rows).filter(|&r| fold_of_row[r] == f).collect();
                 let a = columns.select_rows(&rows);
+                let a_t = a.transpose();
                 let r = fit.residual.select_rows(&rows);
                 Gram {
-                    gram: a.tr_mul(&a),
-                    product: a.tr_mul(&r),
                     rr: r.norm_squared(),
+                    gram: &a_t * &a,
+                    product: &a_t * r,
                 }
             })
             .collect();

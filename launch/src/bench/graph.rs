@@ -1,0 +1,247 @@
+//! A live graph under measurement: a launch file written by the bench, run by `sabr launch`
+//! (this executable) as a child process in an iceoryx2 domain of its own, and the node
+//! processes it started, learnt from their lifecycle announcements.
+
+use anyhow::{bail, Context};
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use sabr::launcher::spec;
+use sabr_node::msgs::LifecycleState;
+use sabr_node::{Domain, GraphObserver};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Longest wait for the launcher to stop its graph after SIGINT (its stop ladder is at most
+/// 5 s per node, nodes stopped one after the other).
+const STOP_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// Lines of the launcher's output quoted when the graph fails.
+const LOG_TAIL_LINES: usize = 15;
+
+/// A graph started by the bench; stopped (and its domain released) by [`LiveGraph::stop`] or
+/// when dropped.
+pub struct LiveGraph {
+    name: String,
+    domain: Domain,
+    launcher: Option<Child>,
+    launcher_log: PathBuf,
+    observer: Option<GraphObserver>,
+    ready: BTreeMap<String, u32>,
+}
+
+impl LiveGraph {
+    /// Writes `launch_toml` to `<dir>/<name>.toml`, checks it (every executable must exist in
+    /// `bin_dir`) and starts `sabr launch` on it in `domain`, logs under `<dir>/runs`. The
+    /// launcher stops the graph by itself after `backstop` should this process die.
+    pub fn start(
+        name: &str,
+        launch_toml: &str,
+        dir: &Path,
+        bin_dir: &Path,
+        domain: Domain,
+        backstop: Duration,
+    ) -> anyhow::Result<Self> {
+        let stale = sabr_node::domain_files(&domain);
+        if !stale.is_empty() {
+            bail!("domain {domain} is in use (iceoryx2 files {stale:?})");
+        }
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let file = dir.join(format!("{name}.toml"));
+        std::fs::write(&file, launch_toml)
+            .with_context(|| format!("cannot write {}", file.display()))?;
+        spec::load(&file, bin_dir).with_context(|| {
+            format!(
+                "the {name} graph cannot be launched from {} (build the node binaries: \
+                 cargo build --release --workspace --bins)",
+                bin_dir.display()
+            )
+        })?;
+        // Joins the domain before any node does, so no announcement is missed.
+        let observer = GraphObserver::new(&domain)?;
+        let launcher_log = dir.join(format!("{name}-launcher.log"));
+        let output = std::fs::File::create(&launcher_log)
+            .with_context(|| format!("cannot create {}", launcher_log.display()))?;
+        let exe = std::env::current_exe().context("cannot locate the sabr executable")?;
+        let launcher = Command::new(&exe)
+            .arg("launch")
+            .arg(&file)
+            .arg("--run-dir")
+            .arg(dir.join("runs"))
+            .args(["--domain", domain.as_str()])
+            .args(["--duration", &format!("{:.0}", backstop.as_secs_f64())])
+            .arg("--bin-dir")
+            .arg(bin_dir)
+            .stdin(Stdio::null())
+            .stdout(output.try_clone()?)
+            .stderr(output)
+            .spawn()
+            .with_context(|| format!("cannot start {} launch", exe.display()))?;
+        Ok(Self {
+            name: name.to_owned(),
+            domain,
+            launcher: Some(launcher),
+            launcher_log,
+            observer: Some(observer),
+            ready: BTreeMap::new(),
+        })
+    }
+
+    /// The graph's domain.
+    pub fn domain(&self) -> &Domain {
+        &self.domain
+    }
+
+    /// Waits up to `timeout` until every node of `nodes` announced readiness.
+    pub fn wait_ready(&mut self, nodes: &[&str], timeout: Duration) -> anyhow::Result<()> {
+        let started = Instant::now();
+        loop {
+            self.poll_lifecycle()?;
+            if nodes.iter().all(|node| self.ready.contains_key(*node)) {
+                return Ok(());
+            }
+            self.check_running()?;
+            if started.elapsed() > timeout {
+                let missing: Vec<&str> = nodes
+                    .iter()
+                    .copied()
+                    .filter(|node| !self.ready.contains_key(*node))
+                    .collect();
+                bail!(
+                    "{} graph: {missing:?} not ready within {timeout:?}{}",
+                    self.name,
+                    self.log_tail()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Fails if the launcher ended or a ready node announced that it is stopping.
+    pub fn check_running(&mut self) -> anyhow::Result<()> {
+        self.poll_lifecycle()?;
+        if let Some(launcher) = &mut self.launcher {
+            if let Some(status) = launcher.try_wait()? {
+                bail!(
+                    "{} graph: the launcher ended early ({status}){}",
+                    self.name,
+                    self.log_tail()
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// `(label, pid)` of every ready node, then of the launcher.
+    pub fn processes(&self) -> Vec<(String, u32)> {
+        let mut processes: Vec<(String, u32)> = self
+            .ready
+            .iter()
+            .map(|(node, pid)| (node.clone(), *pid))
+            .collect();
+        if let Some(launcher) = &self.launcher {
+            processes.push(("launcher".to_owned(), launcher.id()));
+        }
+        processes
+    }
+
+    /// Stops the graph like Ctrl-C would, waits for the launcher, and releases the domain;
+    /// returns the domain's files left behind (none after a clean stop). Every node of the
+    /// bench itself in the domain must be gone by now.
+    pub fn stop(mut self) -> anyhow::Result<Vec<PathBuf>> {
+        self.stop_launcher()
+    }
+
+    fn stop_launcher(&mut self) -> anyhow::Result<Vec<PathBuf>> {
+        // The observer is a node of the domain: leave first, so the domain can be released.
+        self.observer = None;
+        let Some(mut launcher) = self.launcher.take() else {
+            return Ok(Vec::new());
+        };
+        if launcher.try_wait()?.is_none() {
+            let _ = kill(Pid::from_raw(launcher.id() as i32), Signal::SIGINT);
+        }
+        let started = Instant::now();
+        let status = loop {
+            if let Some(status) = launcher.try_wait()? {
+                break Some(status);
+            }
+            if started.elapsed() > STOP_TIMEOUT {
+                let _ = launcher.kill();
+                let _ = launcher.wait();
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let left = sabr_node::release_domain(&self.domain);
+        match status {
+            None => bail!(
+                "{} graph: the launcher did not stop within {STOP_TIMEOUT:?} (killed){}",
+                self.name,
+                self.log_tail()
+            ),
+            Some(status) if !status.success() => bail!(
+                "{} graph: the launcher stopped with {status}{}",
+                self.name,
+                self.log_tail()
+            ),
+            Some(_) => Ok(left),
+        }
+    }
+
+    fn poll_lifecycle(&mut self) -> anyhow::Result<()> {
+        let Some(observer) = &self.observer else {
+            return Ok(());
+        };
+        let own = std::process::id();
+        let mut announcements = Vec::new();
+        observer.poll(|m| announcements.push(m))?;
+        for message in announcements.into_iter().filter(|m| m.pid != own) {
+            let node = message.node.as_str().to_owned();
+            match message.state {
+                LifecycleState::Ready => {
+                    self.ready.insert(node, message.pid);
+                }
+                LifecycleState::Stopping | LifecycleState::Done
+                    if self.ready.get(&node) == Some(&message.pid) =>
+                {
+                    bail!(
+                        "{} graph: node {node} (pid {}) announced {:?} during the measurement{}",
+                        self.name,
+                        message.pid,
+                        message.state,
+                        self.log_tail()
+                    );
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// The end of the launcher's output, for error messages.
+    fn log_tail(&self) -> String {
+        let text = std::fs::read_to_string(&self.launcher_log).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        let tail = lines[lines.len().saturating_sub(LOG_TAIL_LINES)..].join("\n  ");
+        format!(
+            "; launcher output ({}, node logs under {}):\n  {tail}",
+            self.launcher_log.display(),
+            self.launcher_log
+                .parent()
+                .map_or(PathBuf::new(), |dir| dir.join("runs"))
+                .display()
+        )
+    }
+}
+
+impl Drop for LiveGraph {
+    fn drop(&mut self) {
+        if self.launcher.is_some() {
+            if let Err(error) = self.stop_launcher() {
+                eprintln!("sabr bench: {error:#}");
+            }
+        }
+    }
+}
