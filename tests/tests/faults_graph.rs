@@ -11,7 +11,9 @@ use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_integration_tests::{bin, process_alive, LaunchedGraph};
 use sabr_msgs::{services, EncoderSample, MatchedSample, TrackerFrame};
-use sabr_node::{Message, NodeRuntime, Subscriber};
+use sabr_node::iceoryx2::node::{Node, NodeState};
+use sabr_node::iceoryx2::prelude::{ipc, CallbackProgression};
+use sabr_node::{Domain, Message, NodeRuntime, Subscriber};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -120,6 +122,17 @@ fn pid_of(graph: &mut LaunchedGraph, node: &str) -> u32 {
         .pid
 }
 
+/// Nodes of `domain` whose process died and whose resources are still there.
+fn dead_nodes(domain: &Domain) -> usize {
+    let mut dead = 0;
+    Node::<ipc::Service>::list(&domain.iceoryx_config(), |state| {
+        dead += usize::from(matches!(state, NodeState::Dead(_)));
+        CallbackProgression::Continue
+    })
+    .unwrap();
+    dead
+}
+
 fn sigkill(pid: u32) -> Instant {
     kill(Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
     Instant::now()
@@ -193,6 +206,11 @@ fn killed_sync_is_restarted_and_matched_samples_flow_again_within_2_s() {
         graph.output()
     );
     assert!(!process_alive(victim));
+    assert_eq!(
+        dead_nodes(&graph.domain),
+        0,
+        "stale resources of the killed node remain"
+    );
     stop_cleanly(graph, probe);
 }
 
@@ -203,7 +221,17 @@ fn killed_recorder_is_restarted_and_records_again_within_2_s() {
     flowing(&probe.encoders, |s| s.seq, LONG);
     let first = recordings(&graph);
     assert_eq!(first.len(), 1, "{first:?}");
+    let first_encoders = first[0].join("encoders.csv");
+    let start = Instant::now();
+    while rows(&first_encoders) == 0 {
+        assert!(
+            start.elapsed() < LONG,
+            "the recorder writes no encoder rows"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
     let victim = pid_of(&mut graph, "recorder");
+    let rows_before = rows(&first_encoders);
 
     let killed = sigkill(victim);
     let mut recovered = None;
@@ -222,8 +250,13 @@ fn killed_recorder_is_restarted_and_records_again_within_2_s() {
         )
     });
     eprintln!("recorder recovered {recovered:?} after SIGKILL");
-    // The killed recorder's recording is kept, readable up to its last complete row.
-    assert!(rows(&first[0].join("encoders.csv")) > 0);
+    // The killed recorder's recording is kept with every row it had written.
+    assert!(rows(&first_encoders) >= rows_before);
+    assert_eq!(
+        dead_nodes(&graph.domain),
+        0,
+        "stale resources of the killed node remain"
+    );
     stop_cleanly(graph, probe);
 }
 
@@ -283,6 +316,11 @@ fn killed_encoders_are_restarted_and_samples_flow_again_within_2_s() {
             "{node} restarted: {pids:?}"
         );
     }
+    assert_eq!(
+        dead_nodes(&graph.domain),
+        0,
+        "stale resources of the killed node remain"
+    );
     stop_cleanly(graph, probe);
 }
 
@@ -307,6 +345,11 @@ fn killed_tracker_reconnects_to_the_rig_and_frames_flow_again_within_2_s() {
     assert!(graph.wait_ready("tracker", Some(victim), LONG).is_some());
     let rig = pid_of(&mut graph, "rig");
     assert!(process_alive(rig), "the rig died with the tracker");
+    assert_eq!(
+        dead_nodes(&graph.domain),
+        0,
+        "stale resources of the killed node remain"
+    );
     stop_cleanly(graph, probe);
 }
 

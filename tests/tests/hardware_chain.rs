@@ -41,6 +41,21 @@ fn service_bin(name: &str) -> PathBuf {
     path
 }
 
+/// Reclaims what a failed test leaves of its domain: declared before the node processes, it
+/// is dropped after they were killed.
+struct DomainGuard(Domain);
+
+impl Drop for DomainGuard {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            if let Ok(observer) = GraphObserver::new(&self.0) {
+                observer.cleanup_dead_nodes();
+            }
+            sabr_node::release_domain(&self.0);
+        }
+    }
+}
+
 /// A node process of the test, killed if the test fails before stopping it.
 struct NodeProcess {
     name: &'static str,
@@ -137,6 +152,7 @@ fn norm(v: &[f64]) -> f64 {
 #[test]
 fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     let domain = test_domain("hw-chain");
+    let _guard = DomainGuard(domain.clone());
     assert!(
         sabr_node::domain_files(&domain).is_empty(),
         "domain not fresh"
@@ -396,6 +412,7 @@ fn wait_exit(node: &mut NodeProcess, timeout: Duration) -> Option<ExitStatus> {
 #[test]
 fn a_stalled_rig_is_noticed_by_encoders_and_tracker() {
     let domain = test_domain("hw-stall");
+    let _guard = DomainGuard(domain.clone());
     assert!(
         sabr_node::domain_files(&domain).is_empty(),
         "domain not fresh"

@@ -121,7 +121,11 @@ impl TestClient {
             near_joints_rad: HOME_JOINTS,
         };
         let pending = self.client.send_copy(request).unwrap();
-        assert_eq!(pending.number_of_server_connections(), 1, "server connected");
+        assert_eq!(
+            pending.number_of_server_connections(),
+            1,
+            "server connected"
+        );
         self.wake.notify().unwrap();
         let start = Instant::now();
         loop {
@@ -277,13 +281,26 @@ fn ik_server_reloads_announced_parameters_and_keeps_them_when_a_file_is_corrupt(
     std::fs::write(&corrupt, "format = 1\n[geometry]\nl_f = \"fifty\"\n").unwrap();
     announce(1, &corrupt);
     let start = Instant::now();
-    while !server.log().contains("rejected the announced parameter set") {
-        assert!(start.elapsed() < LONG, "no rejection logged:\n{}", server.log());
+    while !server
+        .log()
+        .contains("rejected the announced parameter set")
+    {
+        assert!(
+            start.elapsed() < LONG,
+            "no rejection logged:\n{}",
+            server.log()
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
     assert!(server.log().contains("corrupt.toml"), "{}", server.log());
     let after_corrupt = client.solve(target);
-    assert_eq!(after_corrupt, IkResponse { id: after_corrupt.id, ..before });
+    assert_eq!(
+        after_corrupt,
+        IkResponse {
+            id: after_corrupt.id,
+            ..before
+        }
+    );
 
     // A valid new set is in service once announced, and answers like `sabr ik` on it.
     let second = dir.path().join("params-v2.toml");

@@ -25,14 +25,18 @@ const POSE_SPREAD_RAD: f64 = 0.08;
 pub const SESSION_SEED: u64 = 1;
 
 /// An IK target: the tip (mm, `Bb`) and needle direction of a joint vector, and the joints.
-struct Target {
-    joints: Joints,
-    tip: nalgebra::Point3<f64>,
-    direction: nalgebra::Vector3<f64>,
+pub struct Target {
+    /// Joints θ1..θ5 (rad).
+    pub joints: Joints,
+    /// Needle tip `p_n` in `Bb` (mm).
+    pub tip: nalgebra::Point3<f64>,
+    /// Needle direction `z_N` in `Bb` (unit vector).
+    pub direction: nalgebra::Vector3<f64>,
 }
 
-/// Deterministic joint vectors around home, each reachable by FK and solvable back by IK.
-fn targets(geometry: &Geometry) -> anyhow::Result<Vec<Target>> {
+/// Deterministic joint vectors around home, each reachable by FK and solvable back by IK
+/// (from [`HOME_JOINTS`]) with `geometry`.
+pub fn targets(geometry: &Geometry) -> anyhow::Result<Vec<Target>> {
     let mut found = Vec::new();
     for index in 0..POSE_CANDIDATES {
         let mut joints = HOME_JOINTS;

@@ -103,6 +103,44 @@ mod tests {
     }
 
     #[test]
+    fn one_window_serves_several_processes_in_order() {
+        let mut sleeper = std::process::Command::new("sleep")
+            .arg("5")
+            .spawn()
+            .unwrap();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let spinner = {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    std::hint::spin_loop();
+                }
+            })
+        };
+        let shares = measure_cpu_shares(
+            &[sleeper.id(), std::process::id()],
+            Duration::from_millis(300),
+        );
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        spinner.join().unwrap();
+        let _ = sleeper.kill();
+        let _ = sleeper.wait();
+        let shares = shares.unwrap();
+        assert_eq!(shares.len(), 2);
+        assert_eq!(shares[0].window, shares[1].window);
+        // The sleeping process uses at most one clock tick; the spinning one more.
+        assert!(shares[0].cores <= shares[0].resolution, "{shares:?}");
+        assert!(shares[1].cores > shares[0].cores, "{shares:?}");
+    }
+
+    #[test]
+    fn a_missing_process_is_an_error_naming_its_file() {
+        // Pid 0 never has a /proc entry.
+        let error = measure_cpu_shares(&[0], Duration::ZERO).unwrap_err();
+        assert!(format!("{error:#}").contains("/proc/0/stat"), "{error:#}");
+    }
+
+    #[test]
     fn a_spinning_thread_shows_up_and_stays_within_the_machine() {
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let spinner = {

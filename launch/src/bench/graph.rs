@@ -2,6 +2,8 @@
 //! (this executable) as a child process in an iceoryx2 domain of its own, and the node
 //! processes it started, learnt from their lifecycle announcements.
 
+use super::cpu::CpuShare;
+use super::stats::Measurement;
 use anyhow::{bail, Context};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
@@ -20,11 +22,33 @@ const STOP_TIMEOUT: Duration = Duration::from_secs(60);
 /// Lines of the launcher's output quoted when the graph fails.
 const LOG_TAIL_LINES: usize = 15;
 
-/// A graph started by the bench; stopped (and its domain released) by [`LiveGraph::stop`] or
-/// when dropped.
+/// The iceoryx2 domain `name`, which must not be in use (no files of it exist).
+pub fn fresh_domain(name: &str) -> anyhow::Result<Domain> {
+    let domain = Domain::new(name)?;
+    let files = sabr_node::domain_files(&domain);
+    if let Some(first) = files.first() {
+        bail!(
+            "domain {domain} is in use: {} iceoryx2 files such as {}",
+            files.len(),
+            first.display()
+        );
+    }
+    Ok(domain)
+}
+
+/// What the measurement of one live graph produced.
+pub struct GraphMeasured {
+    /// Hop latencies and errors (ns), named after [`super::hops::HOPS`].
+    pub measurements: Vec<Measurement>,
+    /// CPU use of each process of the graph, labelled `<graph>/<node>`.
+    pub idle: Vec<(String, CpuShare)>,
+    /// Remarks printed under the tables.
+    pub notes: Vec<String>,
+}
+
+/// A graph started by the bench; stopped by [`LiveGraph::stop`] or when dropped.
 pub struct LiveGraph {
     name: String,
-    domain: Domain,
     launcher: Option<Child>,
     launcher_log: PathBuf,
     observer: Option<GraphObserver>,
@@ -33,8 +57,9 @@ pub struct LiveGraph {
 
 impl LiveGraph {
     /// Writes `launch_toml` to `<dir>/<name>.toml`, checks it (every executable must exist in
-    /// `bin_dir`) and starts `sabr launch` on it in `domain`, logs under `<dir>/runs`. The
-    /// launcher stops the graph by itself after `backstop` should this process die.
+    /// `bin_dir`) and starts `sabr launch` on it in `domain` (see [`fresh_domain`]), logs under
+    /// `<dir>/runs`. The launcher stops the graph by itself after `backstop` should this
+    /// process die.
     pub fn start(
         name: &str,
         launch_toml: &str,
@@ -43,21 +68,12 @@ impl LiveGraph {
         domain: Domain,
         backstop: Duration,
     ) -> anyhow::Result<Self> {
-        let stale = sabr_node::domain_files(&domain);
-        if !stale.is_empty() {
-            bail!("domain {domain} is in use (iceoryx2 files {stale:?})");
-        }
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
         let file = dir.join(format!("{name}.toml"));
         std::fs::write(&file, launch_toml)
             .with_context(|| format!("cannot write {}", file.display()))?;
-        spec::load(&file, bin_dir).with_context(|| {
-            format!(
-                "the {name} graph cannot be launched from {} (build the node binaries: \
-                 cargo build --release --workspace --bins)",
-                bin_dir.display()
-            )
-        })?;
+        spec::load(&file, bin_dir)
+            .with_context(|| format!("the {name} graph cannot be launched"))?;
         // Joins the domain before any node does, so no announcement is missed.
         let observer = GraphObserver::new(&domain)?;
         let launcher_log = dir.join(format!("{name}-launcher.log"));
@@ -80,7 +96,6 @@ impl LiveGraph {
             .with_context(|| format!("cannot start {} launch", exe.display()))?;
         Ok(Self {
             name: name.to_owned(),
-            domain,
             launcher: Some(launcher),
             launcher_log,
             observer: Some(observer),
@@ -88,9 +103,11 @@ impl LiveGraph {
         })
     }
 
-    /// The graph's domain.
-    pub fn domain(&self) -> &Domain {
-        &self.domain
+    /// Where the launcher writes the run directory with each node's log (`<run id>/logs/`).
+    pub fn runs_dir(&self) -> PathBuf {
+        self.launcher_log
+            .parent()
+            .map_or(PathBuf::from("runs"), |dir| dir.join("runs"))
     }
 
     /// Waits up to `timeout` until every node of `nodes` announced readiness.
@@ -146,18 +163,18 @@ impl LiveGraph {
         processes
     }
 
-    /// Stops the graph like Ctrl-C would, waits for the launcher, and releases the domain;
-    /// returns the domain's files left behind (none after a clean stop). Every node of the
-    /// bench itself in the domain must be gone by now.
-    pub fn stop(mut self) -> anyhow::Result<Vec<PathBuf>> {
+    /// Stops the graph like Ctrl-C would and waits for the launcher (which removes the
+    /// domain's files once no node of it is left: the bench's own nodes should be gone by
+    /// now).
+    pub fn stop(mut self) -> anyhow::Result<()> {
         self.stop_launcher()
     }
 
-    fn stop_launcher(&mut self) -> anyhow::Result<Vec<PathBuf>> {
+    fn stop_launcher(&mut self) -> anyhow::Result<()> {
         // The observer is a node of the domain: leave first, so the domain can be released.
         self.observer = None;
         let Some(mut launcher) = self.launcher.take() else {
-            return Ok(Vec::new());
+            return Ok(());
         };
         if launcher.try_wait()?.is_none() {
             let _ = kill(Pid::from_raw(launcher.id() as i32), Signal::SIGINT);
@@ -174,7 +191,6 @@ impl LiveGraph {
             }
             std::thread::sleep(Duration::from_millis(20));
         };
-        let left = sabr_node::release_domain(&self.domain);
         match status {
             None => bail!(
                 "{} graph: the launcher did not stop within {STOP_TIMEOUT:?} (killed){}",
@@ -186,7 +202,7 @@ impl LiveGraph {
                 self.name,
                 self.log_tail()
             ),
-            Some(_) => Ok(left),
+            Some(_) => Ok(()),
         }
     }
 
@@ -228,10 +244,7 @@ impl LiveGraph {
         format!(
             "; launcher output ({}, node logs under {}):\n  {tail}",
             self.launcher_log.display(),
-            self.launcher_log
-                .parent()
-                .map_or(PathBuf::new(), |dir| dir.join("runs"))
-                .display()
+            self.runs_dir().display()
         )
     }
 }

@@ -41,42 +41,45 @@ pub struct HopSpec {
     pub p99_limit_ns: Option<u64>,
 }
 
+/// Encoder sample published by `encoders` → received by a second subscriber (the bench).
+pub const ENCODER_TO_SUBSCRIBER: &str = "hop/encoder-sample-to-subscriber";
+/// Tracker frame arrival (stamped by `tracker`) → its matched sample received from `sync`.
+pub const TRACKER_FRAME_TO_MATCHED: &str = "hop/tracker-frame-to-matched";
+/// IK request → response at the client.
+pub const IK_ROUND_TRIP: &str = "hop/ik-round-trip";
+/// Motor setpoint published → the rig's tick that applies it.
+pub const SETPOINT_TO_RIG: &str = "hop/setpoint-to-rig";
+/// |sync's exposure time − the rig's true exposure time| of a tracker frame.
+pub const MATCHING_ERROR: &str = "hop/matching-error";
+
 /// The hops issue 8 asks for, in the order printed.
 pub const HOPS: [HopSpec; 5] = [
     HopSpec {
-        name: "hop/encoder-sample-to-sync",
+        name: ENCODER_TO_SUBSCRIBER,
         baseline: Baseline::PingPong(Payload::EncoderSample),
         p99_limit_ns: None,
     },
     HopSpec {
-        name: "hop/tracker-frame-to-matched",
+        name: TRACKER_FRAME_TO_MATCHED,
         baseline: Baseline::PingPong(Payload::TrackerFrame),
         p99_limit_ns: None,
     },
     HopSpec {
-        name: "hop/ik-round-trip",
+        name: IK_ROUND_TRIP,
         baseline: Baseline::PingPong(Payload::Ik),
         p99_limit_ns: Some(IK_ROUND_TRIP_P99_LIMIT_NS),
     },
     HopSpec {
-        name: "hop/setpoint-to-rig",
+        name: SETPOINT_TO_RIG,
         baseline: Baseline::PingPong(Payload::MotorSetpoint),
         p99_limit_ns: None,
     },
     HopSpec {
-        name: "hop/matching-error",
+        name: MATCHING_ERROR,
         baseline: Baseline::None,
         p99_limit_ns: Some(MATCHING_ERROR_P99_LIMIT_NS),
     },
 ];
-
-/// A measured hop.
-pub struct Hop {
-    /// Which hop.
-    pub spec: HopSpec,
-    /// Its latencies (or errors), ns.
-    pub measurement: Measurement,
-}
 
 /// Whether one goal was met.
 #[derive(Debug, Clone, PartialEq)]
@@ -113,15 +116,12 @@ pub struct RatioRow {
     pub goals: Vec<GoalCheck>,
 }
 
-/// The summary rows of every hop in [`HOPS`]: measured ones from `measured`, compared with the
-/// matching round trips among `baselines`; the rest are "not measured" with `missing_reason`.
-pub fn ratio_rows(
-    measured: &[Hop],
-    baselines: &[Measurement],
-    missing_reason: &str,
-) -> Vec<RatioRow> {
+/// The summary rows of every hop in [`HOPS`]: each hop found (by name) in `measured` is
+/// compared with the matching round trips found there too; the rest are "not measured" with
+/// `missing_reason`.
+pub fn ratio_rows(measured: &[Measurement], missing_reason: &str) -> Vec<RatioRow> {
     HOPS.iter()
-        .map(|spec| match measured.iter().find(|hop| hop.spec == *spec) {
+        .map(|spec| match measured.iter().find(|m| m.name == spec.name) {
             None => RatioRow {
                 hop: spec.name,
                 p99_ns: Err(missing_reason.to_owned()),
@@ -129,16 +129,16 @@ pub fn ratio_rows(
                 vs_uds: None,
                 goals: Vec::new(),
             },
-            Some(hop) => measured_row(hop, baselines),
+            Some(hop) => measured_row(spec, hop, measured),
         })
         .collect()
 }
 
-fn measured_row(hop: &Hop, baselines: &[Measurement]) -> RatioRow {
-    let p99 = hop.measurement.summary().p99;
+fn measured_row(spec: &HopSpec, hop: &Measurement, baselines: &[Measurement]) -> RatioRow {
+    let p99 = hop.summary().p99;
     let mut goals = Vec::new();
     let (mut vs_blocking, mut vs_uds) = (None, None);
-    if let Baseline::PingPong(payload) = hop.spec.baseline {
+    if let Baseline::PingPong(payload) = spec.baseline {
         let baseline_p99 = |transport| {
             let name = baseline_name(transport, payload);
             baselines
@@ -169,7 +169,7 @@ fn measured_row(hop: &Hop, baselines: &[Measurement]) -> RatioRow {
             },
         });
     }
-    if let Some(limit) = hop.spec.p99_limit_ns {
+    if let Some(limit) = spec.p99_limit_ns {
         goals.push(GoalCheck {
             goal: format!("≤ {}", format_ns(limit)),
             outcome: if p99 <= limit {
@@ -180,7 +180,7 @@ fn measured_row(hop: &Hop, baselines: &[Measurement]) -> RatioRow {
         });
     }
     RatioRow {
-        hop: hop.spec.name,
+        hop: spec.name,
         p99_ns: Ok(p99),
         vs_blocking,
         vs_uds,
@@ -191,14 +191,14 @@ fn measured_row(hop: &Hop, baselines: &[Measurement]) -> RatioRow {
 /// The printed summary table of [`ratio_rows`].
 pub fn ratio_table(rows: &[RatioRow]) -> String {
     let mut text = format!(
-        "{:<30} {:>12} {:>14} {:>8}  goals (p99)\n",
+        "{:<33} {:>12} {:>14} {:>8}  goals (p99)\n",
         "hop", "p99", "×iox2-event", "×uds"
     );
     let ratio = |r: Option<f64>| r.map_or("-".to_owned(), |r| format!("{r:.2}"));
     for row in rows {
         match &row.p99_ns {
             Err(reason) => {
-                let _ = writeln!(text, "{:<30} not measured: {reason}", row.hop);
+                let _ = writeln!(text, "{:<33} not measured: {reason}", row.hop);
             }
             Ok(p99) => {
                 let goals: Vec<String> = row
@@ -212,7 +212,7 @@ pub fn ratio_table(rows: &[RatioRow]) -> String {
                     .collect();
                 let _ = writeln!(
                     text,
-                    "{:<30} {:>12} {:>14} {:>8}  {}",
+                    "{:<33} {:>12} {:>14} {:>8}  {}",
                     row.hop,
                     format_ns(*p99),
                     ratio(row.vs_blocking),
@@ -237,21 +237,20 @@ mod tests {
         m
     }
 
-    fn hop(index: usize, p99: u64) -> Hop {
-        Hop {
-            spec: HOPS[index],
-            measurement: constant(HOPS[index].name, p99),
-        }
+    fn hop(index: usize, p99: u64) -> Measurement {
+        constant(HOPS[index].name, p99)
     }
 
     #[test]
     fn ratios_divide_the_hop_p99_by_the_matching_baselines() {
-        let baselines = [
+        let measured = [
             constant("iox2-event/encoder-sample", 1000),
             constant("uds/encoder-sample", 1500),
             constant("iox2-event/tracker-frame", 100),
+            hop(0, 1800),
+            hop(1, 400),
         ];
-        let rows = ratio_rows(&[hop(0, 1800), hop(1, 400)], &baselines, "no graph");
+        let rows = ratio_rows(&measured, "no graph");
         assert_eq!(rows.len(), HOPS.len());
 
         assert_eq!(rows[0].p99_ns, Ok(1800));
@@ -273,11 +272,13 @@ mod tests {
 
     #[test]
     fn absolute_limits_apply_with_and_without_baseline() {
-        let baselines = [
+        let measured = [
+            hop(2, 60_000),
             constant("iox2-event/ik", 40_000),
             constant("uds/ik", 90_000),
+            hop(4, 400_000),
         ];
-        let rows = ratio_rows(&[hop(2, 60_000), hop(4, 400_000)], &baselines, "-");
+        let rows = ratio_rows(&measured, "-");
         let ik = &rows[2];
         // Above 2048 ns the histogram keeps 3 significant digits.
         let ratio = ik.vs_blocking.unwrap();
@@ -293,18 +294,15 @@ mod tests {
 
     #[test]
     fn table_shows_ratios_and_reasons() {
-        let baselines = [
+        let measured = [
             constant("iox2-event/encoder-sample", 1000),
             constant("uds/encoder-sample", 3000),
+            hop(0, 1500),
         ];
-        let table = ratio_table(&ratio_rows(
-            &[hop(0, 1500)],
-            &baselines,
-            "graph not running",
-        ));
+        let table = ratio_table(&ratio_rows(&measured, "graph not running"));
         let lines: Vec<&str> = table.lines().collect();
         assert!(
-            lines[1].starts_with("hop/encoder-sample-to-sync"),
+            lines[1].starts_with("hop/encoder-sample-to-subscriber"),
             "{table}"
         );
         assert!(

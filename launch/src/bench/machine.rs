@@ -12,9 +12,21 @@ pub fn describe() -> String {
         .map_or("unknown".to_owned(), |kib| {
             format!("{:.1}", kib / 1024.0 / 1024.0)
         });
-    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    let load = load.split_whitespace().next().unwrap_or("unknown");
-    format!("{cores} cores, {model}, {memory} GiB RAM, load average {load} (1 min)")
+    format!(
+        "{cores} cores, {model}, {memory} GiB RAM, load average {} (1, 5, 15 min)",
+        load_average()
+    )
+}
+
+/// The 1, 5 and 15 minute load averages from `/proc/loadavg`, e.g. `1.63 2.10 3.05`.
+pub fn load_average() -> String {
+    let text = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let fields: Vec<&str> = text.split_whitespace().take(3).collect();
+    if fields.len() == 3 {
+        fields.join(" ")
+    } else {
+        "unknown".to_owned()
+    }
 }
 
 /// The value of the first `key: value` line with `key` in a `/proc` text.

@@ -1,11 +1,15 @@
 //! `sabr bench`: the latency of the transports the graph is built on (iceoryx2 with busy
 //! polling and with blocking wake-up, Unix-domain sockets; separate processes, the graph's own
 //! message sizes), compute costs (FK, IK, `sim record`, calibration), and the live-graph hops
-//! as ratios to those baselines. Prints p50/p90/p99/p99.9/max and writes one `.hgrm` per
-//! measurement, `bench.csv` and `idle-cpu.csv` to the output directory.
+//! (the sensing graph with the IK server, and the rig following setpoints, each launched in a
+//! domain of its own) as ratios to those baselines, with the CPU use of every process. Prints
+//! p50/p90/p99/p99.9/max and writes one `.hgrm` per measurement, `bench.csv` and
+//! `idle-cpu.csv` to the output directory, the graphs' launch files and logs to
+//! `<out>/graphs/`.
 
 mod compute;
 mod cpu;
+mod graph;
 mod hops;
 mod iox;
 mod machine;
@@ -13,6 +17,8 @@ mod output;
 mod payload;
 mod pingpong;
 mod pong;
+mod sensing;
+mod setpoints;
 mod stats;
 mod uds;
 
@@ -31,17 +37,22 @@ pub struct BenchArgs {
     /// Output directory (must be absent or empty) [default: runs/bench-<unix time>].
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
-    /// Round trips per ping-pong baseline, and kinematics solves / 100 [default: 20000,
-    /// with --quick 1000].
+    /// Round trips per ping-pong baseline; also sets the kinematics batches (N/100), the live
+    /// graph's IK requests (N/2) and motor setpoints (N/10) [default: 20000, with --quick
+    /// 1000].
     #[arg(long, value_name = "N")]
     samples: Option<u64>,
     /// A quick check, not figures to quote: fewer samples, short idle windows, a simulated
-    /// session of 1/10 the default length.
+    /// session of 1/10 the default length, 5 s of the sensing graph instead of 60 s.
     #[arg(long)]
     quick: bool,
     /// Parts to run (comma-separated) [default: all].
     #[arg(long, value_enum, value_delimiter = ',', value_name = "PART")]
     only: Vec<Part>,
+    /// Directory of the node executables of the live graphs [default: the directory of this
+    /// executable].
+    #[arg(long, value_name = "DIR")]
+    bin_dir: Option<PathBuf>,
     #[command(flatten)]
     pong: pong::PongArgs,
 }
@@ -53,7 +64,7 @@ enum Part {
     Baselines,
     /// FK and IK per solve, `sim record` and calibration time.
     Compute,
-    /// Hops of the live graph, as ratios to the baselines.
+    /// Hops of the live graphs, as ratios to the baselines, and their CPU use.
     Hops,
 }
 
@@ -63,6 +74,9 @@ struct Settings {
     ping_pong: pingpong::Plan,
     kinematics_batches: u64,
     session_scale: f64,
+    sensing: sensing::Plan,
+    setpoints: setpoints::Plan,
+    bin_dir: PathBuf,
 }
 
 impl Settings {
@@ -78,6 +92,16 @@ impl Settings {
         } else {
             args.only.clone()
         };
+        let bin_dir = match &args.bin_dir {
+            Some(dir) => dir.clone(),
+            None => std::env::current_exe()
+                .context("cannot locate the sabr executable")?
+                .parent()
+                .map(PathBuf::from)
+                .context("the sabr executable has no directory")?,
+        };
+        let graph_cpu_window = Duration::from_secs(if args.quick { 1 } else { 5 });
+        let ready_timeout = Duration::from_secs(60);
         Ok(Self {
             parts,
             ping_pong: pingpong::Plan {
@@ -87,6 +111,18 @@ impl Settings {
             },
             kinematics_batches: (samples / compute::SOLVES_PER_BATCH).max(10),
             session_scale: if args.quick { 0.1 } else { 1.0 },
+            sensing: sensing::Plan {
+                ready_timeout,
+                cpu_window: graph_cpu_window,
+                window: Duration::from_secs(if args.quick { 5 } else { 60 }),
+                ik_requests: (samples / 2).max(10),
+            },
+            setpoints: setpoints::Plan {
+                ready_timeout,
+                cpu_window: graph_cpu_window,
+                setpoints: (samples / 10).max(10),
+            },
+            bin_dir,
         })
     }
 
@@ -109,12 +145,26 @@ impl Results {
     fn add(&mut self, name: &str, measured: anyhow::Result<Vec<Measurement>>) {
         match measured {
             Ok(measurements) => self.measurements.extend(measurements),
-            Err(error) => {
-                let line = format!("{name}: not available: {error:#}");
-                eprintln!("{line}");
-                self.unavailable.push(line);
-            }
+            Err(error) => self.not_available(name, &error),
         }
+    }
+
+    /// Keeps what a live graph measured, or prints and keeps why it could not be.
+    fn add_graph(&mut self, name: &str, measured: anyhow::Result<graph::GraphMeasured>) {
+        match measured {
+            Ok(graph) => {
+                self.measurements.extend(graph.measurements);
+                self.idle.extend(graph.idle);
+                self.notes.extend(graph.notes);
+            }
+            Err(error) => self.not_available(name, &error),
+        }
+    }
+
+    fn not_available(&mut self, name: &str, error: &anyhow::Error) {
+        let line = format!("{name}: not available: {error:#}");
+        eprintln!("{line}");
+        self.unavailable.push(line);
     }
 }
 
@@ -135,11 +185,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     if settings.runs(Part::Compute) {
         run_compute(&settings, &out, &mut results);
     }
-    let hop_rows = hops::ratio_rows(
-        &[],
-        &results.measurements,
-        "the live graph is not measured yet (issue 8 follow-up)",
-    );
+    if settings.runs(Part::Hops) {
+        run_hops(&settings, &out, &mut results);
+    }
+    let hop_rows = hops::ratio_rows(&results.measurements, "failed: see the error above");
 
     output::write_hgrm_files(&out, &results.measurements)?;
     output::write_csv(&out.join(output::CSV_FILE), &results.measurements)?;
@@ -152,21 +201,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         for payload in Payload::ALL {
             println!("  {}", payload.describe());
         }
-        println!("\nCPU use of the waiting pong process (1.0 = one core):");
-        for (name, share) in &results.idle {
-            let goal = if share.cores <= hops::IDLE_CPU_LIMIT_CORES {
-                "met"
-            } else {
-                "MISSED"
-            };
-            println!(
-                "  {name:<32} {:.3} (±{:.3} over {:.1} s; idle goal ≤ {}: {goal})",
-                share.cores,
-                share.resolution,
-                share.window.as_secs_f64(),
-                hops::IDLE_CPU_LIMIT_CORES
-            );
-        }
+    }
+    if !results.idle.is_empty() {
+        print!("\n{}", output::idle_table(&results.idle));
     }
     for note in &results.notes {
         println!("{note}");
@@ -178,6 +215,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     for line in &results.unavailable {
         println!("{line}");
     }
+    println!(
+        "\nload average at the end: {} (1, 5, 15 min)",
+        machine::load_average()
+    );
     println!(
         "\nwrote {} .hgrm files (values in µs), {} and {} to {}",
         results.measurements.len(),
@@ -243,6 +284,38 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         ));
     }
     Ok(())
+}
+
+/// The live graphs one after the other, each in an iceoryx2 domain of its own; their launch
+/// files and logs go to `<out>/graphs/`.
+fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
+    let dir = out.join("graphs");
+    let pid = std::process::id();
+    // Runs one graph in its own fresh domain, then releases the domain whatever happened
+    // (the bench's and the graph's nodes are gone by then).
+    let mut in_domain =
+        |graph: &str, run: &dyn Fn(Domain) -> anyhow::Result<graph::GraphMeasured>| {
+            let measured =
+                graph::fresh_domain(&format!("sabr-bench-{pid}-{graph}")).and_then(|domain| {
+                    let measured = run(domain.clone());
+                    let left = sabr_node::release_domain(&domain);
+                    if !left.is_empty() {
+                        results.notes.push(format!(
+                            "warning: iceoryx2 files of domain {domain} left behind: {left:?}"
+                        ));
+                    }
+                    measured
+                });
+            results.add_graph(&format!("{graph} graph"), measured);
+        };
+    eprintln!("measuring the sensing graph: hops, matching error, IK round trips, CPU ...");
+    in_domain("sensing", &|domain| {
+        sensing::run(&settings.sensing, &dir, &settings.bin_dir, domain)
+    });
+    eprintln!("measuring the setpoint graph: setpoint → rig, CPU ...");
+    in_domain("setpoints", &|domain| {
+        setpoints::run(&settings.setpoints, &dir, &settings.bin_dir, domain)
+    });
 }
 
 /// Kinematics per solve, then `sim record` and calibration of that recording in `out/work`

@@ -2,6 +2,7 @@
 //! and the table printed on stdout.
 
 use super::cpu::CpuShare;
+use super::hops::IDLE_CPU_LIMIT_CORES;
 use super::stats::{format_ns, Measurement, Summary};
 use anyhow::Context;
 use hdrhistogram::Histogram;
@@ -139,6 +140,35 @@ pub fn write_idle_csv(path: &Path, shares: &[(String, CpuShare)]) -> anyhow::Res
     writer.flush().with_context(context)
 }
 
+/// The printed CPU table: one line per process (1.0 = one core busy) with the idle goal's
+/// verdict, and what the labels mean.
+pub fn idle_table(shares: &[(String, CpuShare)]) -> String {
+    let mut text =
+        format!("CPU use per process (1.0 = one core; idle goal ≤ {IDLE_CPU_LIMIT_CORES}):\n");
+    for (process, share) in shares {
+        let goal = if share.cores <= IDLE_CPU_LIMIT_CORES {
+            "met"
+        } else {
+            "MISSED"
+        };
+        let _ = writeln!(
+            text,
+            "  {process:<34} {:.3} (±{:.3} over {:.1} s): {goal}",
+            share.cores,
+            share.resolution,
+            share.window.as_secs_f64()
+        );
+    }
+    text.push_str(
+        "  <transport>/<payload>: the baseline's pong waiting for a message; sensing/*: the \
+         sensing graph streaming (rig autoplaying the session: it simulates the robot and \
+         tracker at 2 kHz, never idle), the IK server without requests; setpoints/*: the rig \
+         holding still without setpoints (it still simulates at 2 kHz); launcher: `sabr \
+         launch` supervising\n",
+    );
+    text
+}
+
 /// The printed percentile table: one line per measurement.
 pub fn percentile_table(measurements: &[Measurement]) -> String {
     let mut text = format!(
@@ -265,6 +295,29 @@ mod tests {
         let text = std::fs::read_to_string(&paths[0]).unwrap();
         // Written in µs: the maximum 1000 ns is 1.000.
         assert!(text.contains("#[Max     =        1.000,"), "{text}");
+    }
+
+    #[test]
+    fn idle_table_judges_each_process_against_the_goal() {
+        let share = |cores| CpuShare {
+            cores,
+            resolution: 0.002,
+            window: std::time::Duration::from_secs(5),
+        };
+        let table = idle_table(&[
+            ("sensing/ik".to_owned(), share(0.004)),
+            ("sensing/rig-autoplay".to_owned(), share(0.31)),
+        ]);
+        let lines: Vec<&str> = table.lines().collect();
+        assert!(lines[0].contains("idle goal ≤ 0.05"), "{table}");
+        assert!(
+            lines[1].ends_with("sensing/ik                         0.004 (±0.002 over 5.0 s): met"),
+            "{table}"
+        );
+        assert!(
+            lines[2].ends_with("0.310 (±0.002 over 5.0 s): MISSED"),
+            "{table}"
+        );
     }
 
     #[test]

@@ -18,6 +18,8 @@
 //! required = true              # default true: its end stops the whole graph
 //! ready_timeout_s = 10.0       # default 10
 //! heartbeat_timeout_s = 2.0    # optional: silent this long while ready → killed (and restarted)
+//! console = true               # default false: its stdout lines are also shown on the
+//!                              # launcher's terminal (prefixed with the node's name)
 //! ```
 
 use serde::Deserialize;
@@ -82,6 +84,8 @@ pub struct NodeSpec {
     pub ready_timeout: Duration,
     /// Longest silence (no heartbeat) of a ready node before it is killed; `None`: not watched.
     pub heartbeat_timeout: Option<Duration>,
+    /// If true, the node's stdout lines also go to the launcher's terminal (progress, results).
+    pub console: bool,
 }
 
 /// A validated graph: nodes in start order (every node after its dependencies).
@@ -133,6 +137,8 @@ struct NodeToml {
     required: bool,
     ready_timeout_s: Option<Spanned<f64>>,
     heartbeat_timeout_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    console: bool,
 }
 
 fn default_max_restarts() -> u32 {
@@ -212,6 +218,7 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             required: node.required,
             ready_timeout: seconds(&node.ready_timeout_s, 10.0, "ready_timeout_s", &at)?,
             heartbeat_timeout,
+            console: node.console,
         });
     }
     for entry in &parsed.node {

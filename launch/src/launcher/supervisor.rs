@@ -6,15 +6,18 @@ use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_node::msgs::LifecycleState;
 use sabr_node::{Domain, GraphObserver, DOMAIN_ENV, NODE_NAME_ENV, RUN_DIR_ENV};
-use std::io::Write;
+use std::io::{BufRead, Write};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ChildStdout, Command, ExitStatus, Stdio};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 /// How often the supervisor looks at its children and the lifecycle messages.
 const POLL: Duration = Duration::from_millis(10);
 /// A node ready this long gets its restart count and backoff reset.
 const STABLE_AFTER: Duration = Duration::from_secs(10);
+/// Longest wait, once a console node has exited, for its last stdout lines to be shown.
+const ECHO_DRAIN: Duration = Duration::from_secs(1);
 
 /// Why the graph stops.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -71,6 +74,8 @@ struct Proc {
     restarts_in_a_row: u32,
     last_seen: Instant,
     announced_done: bool,
+    /// Copies the stdout of a `console` node to the log and the terminal.
+    echo: Option<JoinHandle<()>>,
 }
 
 /// The running graph.
@@ -106,6 +111,7 @@ impl<'a> Supervisor<'a> {
                 restarts_in_a_row: 0,
                 last_seen: t0,
                 announced_done: false,
+                echo: None,
             })
             .collect();
         Ok(Self {
@@ -168,6 +174,9 @@ impl<'a> Supervisor<'a> {
                 }
                 let _ = kill(Pid::from_raw(child.id() as i32), signal);
                 status = wait_exit(&mut child, grace);
+            }
+            if status.is_some() {
+                drain_echo(self.procs[i].echo.take());
             }
             match status {
                 Some(status) => self.say(format_args!("{name} stopped ({})", describe(status))),
@@ -357,7 +366,8 @@ impl<'a> Supervisor<'a> {
             "restarting"
         };
         match self.start_process(&self.procs[i].spec, label, starts) {
-            Ok(child) => {
+            Ok((child, echo)) => {
+                drain_echo(std::mem::replace(&mut self.procs[i].echo, echo));
                 self.say(format_args!(
                     "{label} {} (pid {})",
                     self.procs[i].spec.name,
@@ -384,7 +394,12 @@ impl<'a> Supervisor<'a> {
         }
     }
 
-    fn start_process(&self, spec: &NodeSpec, label: &str, starts: u32) -> anyhow::Result<Child> {
+    fn start_process(
+        &self,
+        spec: &NodeSpec,
+        label: &str,
+        starts: u32,
+    ) -> anyhow::Result<(Child, Option<JoinHandle<()>>)> {
         let mut log = self.run.open_log(&spec.name)?;
         writeln!(
             log,
@@ -399,13 +414,51 @@ impl<'a> Supervisor<'a> {
             .env(NODE_NAME_ENV, &spec.name)
             .env(RUN_DIR_ENV, self.run.path())
             .stdin(Stdio::null())
-            .stdout(log.try_clone()?)
-            .stderr(log)
+            .stdout(if spec.console {
+                Stdio::piped()
+            } else {
+                log.try_clone()?.into()
+            })
+            .stderr(log.try_clone()?)
             // Own process group: a terminal's Ctrl-C reaches only the launcher, which then
             // stops the nodes in reverse order.
             .process_group(0);
         die_with_launcher(&mut command);
-        Ok(command.spawn()?)
+        let mut child = command.spawn()?;
+        let echo = child
+            .stdout
+            .take()
+            .map(|out| echo_lines(out, log, spec.name.clone(), self.t0));
+        Ok((child, echo))
+    }
+}
+
+/// Copies a console node's stdout line by line to its log and to the launcher's terminal
+/// (`[time] node: line`), until the node closes it.
+fn echo_lines(
+    out: ChildStdout,
+    mut log: std::fs::File,
+    node: String,
+    t0: Instant,
+) -> JoinHandle<()> {
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(out).lines() {
+            let Ok(line) = line else { break };
+            let _ = writeln!(log, "{line}");
+            eprintln!("[{:8.3}] {node}: {line}", t0.elapsed().as_secs_f64());
+        }
+    })
+}
+
+/// Lets the echo of an exited console node show its last lines (bounded wait).
+fn drain_echo(echo: Option<JoinHandle<()>>) {
+    let Some(echo) = echo else { return };
+    let start = Instant::now();
+    while !echo.is_finished() && start.elapsed() < ECHO_DRAIN {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if echo.is_finished() {
+        let _ = echo.join();
     }
 }
 

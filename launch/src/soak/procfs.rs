@@ -21,8 +21,8 @@ pub fn read(pid: u32) -> anyhow::Result<ProcReading> {
     let stat =
         std::fs::read_to_string(&stat_path).with_context(|| format!("cannot read {stat_path}"))?;
     Ok(ProcReading {
-        rss_kib: parse_vm_rss_kib(&status).with_context(|| format!("{status_path}"))?,
-        cpu_ticks: parse_cpu_ticks(&stat).with_context(|| format!("{stat_path}"))?,
+        rss_kib: parse_vm_rss_kib(&status).with_context(|| status_path.clone())?,
+        cpu_ticks: parse_cpu_ticks(&stat).with_context(|| stat_path.clone())?,
     })
 }
 

@@ -3,7 +3,8 @@
 //! the tip error against the simulator's truth.
 //!
 //! `cargo run --release -p sabr-calibrator --example effects_sim -- SEED SCALE [EFFECT...]`,
-//! e.g. `... -- 3 0.25 ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.4`.
+//! e.g. `... -- 3 0.25 ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.4`. With
+//! `EFFECTS_OUT=DIR` the calibration outputs are written to DIR.
 
 use sabr_calibrator::residual_loop::motion::{MotionTrack, DIRECTION_DEAD_BAND_COUNTS};
 use sabr_calibrator::{calibrate, CalibrationOptions};
@@ -13,7 +14,11 @@ use sabr_sim::{record_session, SimConfig, SimEffect, Truth};
 
 /// RMS tip error (mm) of `params` against the truth at the validation holds, with the
 /// motion direction the encoder history gives.
-fn truth_tip_rms(params: &RobotParams, recording: &Recording, truth: &Truth) -> anyhow::Result<f64> {
+fn truth_tip_rms(
+    params: &RobotParams,
+    recording: &Recording,
+    truth: &Truth,
+) -> anyhow::Result<f64> {
     let times: Vec<i64> = recording.encoders.iter().map(|r| r.t_ns).collect();
     let counts: Vec<[i64; 5]> = recording.encoders.iter().map(|r| r.counts).collect();
     let motion = MotionTrack::new(&times, &counts, DIRECTION_DEAD_BAND_COUNTS);
@@ -43,6 +48,9 @@ fn main() -> anyhow::Result<()> {
     let started = std::time::Instant::now();
     let calibration = calibrate(&recording, &CalibrationOptions::default())?;
     println!("calibrated in {:.2} s", started.elapsed().as_secs_f64());
+    if let Some(dir) = std::env::var_os("EFFECTS_OUT") {
+        sabr_calibrator::write_outputs(&calibration, std::path::Path::new(&dir))?;
+    }
     let report = &calibration.report;
     print!("{}", sabr_calibrator::residual_loop::summary_text(report));
     for e in &report.effects {
@@ -50,14 +58,23 @@ fn main() -> anyhow::Result<()> {
     }
     println!("leads:");
     for c in &report.r#final.leads {
-        println!("  {:40} Δχ² {:10.1} share {:.4} held-out {:10.1} sig {}", c.label, c.chi2_gain, c.explained_share, c.held_out_gain, c.significant);
+        println!(
+            "  {:40} Δχ² {:10.1} share {:.4} held-out {:10.1} sig {}",
+            c.label, c.chi2_gain, c.explained_share, c.held_out_gain, c.significant
+        );
     }
     println!("strongest correlates of the final residual:");
     for c in &report.r#final.strongest_correlates {
-        println!("  {:40} Δχ² {:10.1} share {:.4} held-out {:10.1} sig {}", c.label, c.chi2_gain, c.explained_share, c.held_out_gain, c.significant);
+        println!(
+            "  {:40} Δχ² {:10.1} share {:.4} held-out {:10.1} sig {}",
+            c.label, c.chi2_gain, c.explained_share, c.held_out_gain, c.significant
+        );
     }
     for t in &report.r#final.metrics.noise_test {
-        println!("noise test {}: ratio {:.3} dof {:.0}/{:.0} p {:.2e}", t.tool, t.variance_ratio, t.dof, t.reference_dof, t.p_value);
+        println!(
+            "noise test {}: ratio {:.3} dof {:.0}/{:.0} p {:.2e}",
+            t.tool, t.variance_ratio, t.dof, t.reference_dof, t.p_value
+        );
     }
     let mut paper = calibration.params.clone();
     paper.effects.clear();

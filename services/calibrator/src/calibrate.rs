@@ -171,8 +171,7 @@ pub fn calibrate(
     );
     let layout = ParamLayout::paper();
     let fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
-    let (fit, discovery) =
-        crate::residual_loop::discover(&session, fit, &dwell_noise, dwell.len())?;
+    let (fit, discovery) = crate::residual_loop::discover(&session, fit, &dwell_noise, dwell.len());
 
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "joint fit");
     let validation_frames: Vec<Observation> =

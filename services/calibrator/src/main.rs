@@ -22,7 +22,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
             tracing::error!("{error:#}");
-            println!("calibrator: {error:#}");
+            println!("FAILED: {error:#}");
             ExitCode::FAILURE
         }
     }

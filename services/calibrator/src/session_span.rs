@@ -128,7 +128,11 @@ mod tests {
             ],
         };
         let kept = within_session(&recording);
-        let times: Vec<i64> = kept.encoders.iter().map(|r| r.t_ns / 1_000_000_000).collect();
+        let times: Vec<i64> = kept
+            .encoders
+            .iter()
+            .map(|r| r.t_ns / 1_000_000_000)
+            .collect();
         assert_eq!(times, (10..=20).collect::<Vec<_>>());
         assert_eq!(kept.phases, recording.phases);
     }

@@ -6,10 +6,6 @@ use sabr_node::iceoryx2::prelude::ipc;
 use sabr_node::{Client, NodeError, NodeRuntime};
 use std::time::{Duration, Instant};
 
-/// Polls of the response spent spinning before the client starts yielding the CPU: a solve
-/// takes a few µs, so most answers arrive within the spin.
-const SPINS_BEFORE_YIELD: u32 = 2_000;
-
 /// Why a request got no response.
 #[derive(Debug, thiserror::Error)]
 pub enum IkClientError {
@@ -98,7 +94,8 @@ impl IkClient {
                 .map_err(|e| port_error("receive a response", e))?;
             Ok(response.map(|response| *response.payload()))
         };
-        let mut spins = 0u32;
+        // Poll, yielding the CPU between polls: on a busy host the server may need this
+        // core to answer (a pure spin made the p99 ten times longer on a loaded host).
         loop {
             if let Some(response) = receive()? {
                 return Ok(response);
@@ -106,11 +103,6 @@ impl IkClient {
             // The server drops the request right after answering: look once more.
             if !pending.is_connected() {
                 return receive()?.ok_or(IkClientError::ServerGone { id: request.id });
-            }
-            spins = spins.saturating_add(1);
-            if spins < SPINS_BEFORE_YIELD {
-                std::hint::spin_loop();
-                continue;
             }
             if start.elapsed() >= timeout {
                 return Err(IkClientError::Timeout {

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 /// The IK server of the SABR graph (request-response on `sabr/ik/solve`).
 #[derive(Debug, Parser)]
-#[command(name = "sabr-ik", version, about)]
+#[command(name = "sabr-ik", version)]
 struct Args {
     /// Parameter file served until the calibrator announces a new set (version 0): a
     /// calibrated params.toml, or a robot.toml (it has no joint offsets, so requests get

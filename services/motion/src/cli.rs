@@ -41,8 +41,9 @@ pub struct Args {
     /// Seed of the calibration plan's random choices (multi-sine phases, validation poses).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Lower joint limits θ1..θ5 (rad, comma-separated). Default: each stop minus or plus
-    /// --joint-range on the workspace side.
+    /// Lower joint limits θ1..θ5 (rad, comma-separated). Default box: from 0.05 rad beyond
+    /// each nominal stop (the true stops differ by up to about 2°) to --joint-range from the
+    /// stop into the workspace.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub joint_lower: Option<Vec<f64>>,
     /// Upper joint limits θ1..θ5 (rad, comma-separated).
@@ -273,7 +274,7 @@ mod tests {
         let a = args(&["--duration-scale", "0.02", "--joint-range", "0.3"]);
         let limits = a.limits(&params).unwrap();
         let error = a.tasks(&params, &limits).unwrap_err().to_string();
-        assert!(error.starts_with("plan refused before moving"), "{error}");
+        assert!(error.starts_with("plan refused"), "{error}");
         assert!(
             error.contains("lower limit") || error.contains("upper limit"),
             "{error}"

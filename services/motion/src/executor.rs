@@ -110,14 +110,6 @@ pub enum Outcome {
     Faulted(String),
 }
 
-/// Parameters with joint offsets, as used to turn joints into counts.
-#[derive(Debug, Clone)]
-struct ParamsInForce {
-    params: RobotParams,
-    /// Version of the announced or given set; `None` for offsets from this run's homing.
-    version: Option<u64>,
-}
-
 #[derive(Debug)]
 enum Stage {
     AwaitFeedback,
@@ -134,6 +126,7 @@ enum Stage {
     PlanningLine {
         planner: Box<LinePlanner>,
         spec: LineSpec,
+        params: Box<RobotParams>,
         version: u64,
     },
     Finished,
@@ -145,7 +138,11 @@ enum Stage {
 pub struct Executor {
     config: ExecutorConfig,
     base: RobotParams,
-    in_force: Option<ParamsInForce>,
+    /// The base parameters with the offsets of this run's homing: what joint plans that
+    /// start at the stops are played with.
+    homed: Option<RobotParams>,
+    /// A given parameter set with offsets (`--params`, version 0).
+    given: Option<RobotParams>,
     announced: Option<ParameterSet>,
     tasks: VecDeque<Task>,
     stage: Stage,
@@ -159,12 +156,10 @@ pub struct Executor {
 
 impl Executor {
     /// An executor of `tasks` for the robot `base` (nominal or given parameters; if they have
-    /// joint offsets they are in force as version 0), created at `now_ns`.
+    /// joint offsets they are the line's parameter set version 0 until one is announced),
+    /// created at `now_ns`.
     pub fn new(config: ExecutorConfig, base: RobotParams, tasks: Vec<Task>, now_ns: i64) -> Self {
-        let in_force = base.joints.offset.is_some().then(|| ParamsInForce {
-            params: base.clone(),
-            version: Some(0),
-        });
+        let given = base.joints.offset.is_some().then(|| base.clone());
         Self {
             encoder: FeedbackWatch::new("encoder", config.encoder_deadline_ns),
             tracker: config
@@ -172,7 +167,8 @@ impl Executor {
                 .map(|deadline| FeedbackWatch::new("tracker", deadline)),
             config,
             base,
-            in_force,
+            homed: None,
+            given,
             announced: None,
             tasks: tasks.into(),
             stage: Stage::AwaitFeedback,
@@ -327,10 +323,7 @@ impl Executor {
                             let mut params = self.base.clone();
                             params.joints.offset = Some(offsets_from_stops(&params, &stop_counts));
                             tracing::info!(?stop_counts, offsets = ?params.joints.offset, "homed");
-                            self.in_force = Some(ParamsInForce {
-                                params,
-                                version: None,
-                            });
+                            self.homed = Some(params);
                             events.push(Event::Phase {
                                 name: HOMING.into(),
                                 start_ns: dwell_start_ns,
@@ -356,10 +349,6 @@ impl Executor {
                     if let Some(set) = self.announced.as_ref().filter(|s| s.version > newer_than) {
                         tracing::info!(version = set.version, path = %set.path.display(),
                             "calibrated parameter set in force");
-                        self.in_force = Some(ParamsInForce {
-                            params: set.params.clone(),
-                            version: Some(set.version),
-                        });
                         continue;
                     }
                     if now_ns - since_ns > self.config.parameters_timeout_ns {
@@ -382,6 +371,7 @@ impl Executor {
                 Stage::PlanningLine {
                     mut planner,
                     spec,
+                    params,
                     version,
                 } => {
                     let budget = self.config.ik_requests_per_period;
@@ -393,13 +383,14 @@ impl Executor {
                             self.stage = Stage::PlanningLine {
                                 planner,
                                 spec,
+                                params,
                                 version,
                             };
                             self.set_status(MotionState::Idle, "planning the line", events);
                             return Ok(());
                         }
                         PlannerStep::Ready(waypoints) => {
-                            let segments = self.line_plan(&spec, &waypoints)?;
+                            let segments = self.line_plan(&spec, &params, &waypoints)?;
                             tracing::info!(version, start = ?spec.start, end = ?spec.end(),
                                 "line planned and within the limits");
                             events.push(Event::LinePlanned { spec, version });
@@ -437,11 +428,11 @@ impl Executor {
                 let counts = match &segment.counts {
                     Some(counts) => counts[index],
                     None => {
-                        let params = &self
-                            .in_force
+                        let params = self
+                            .homed
                             .as_ref()
-                            .ok_or("no joint offsets to turn the plan into counts")?
-                            .params;
+                            .or(self.given.as_ref())
+                            .ok_or("no joint offsets to turn the plan into counts")?;
                         params
                             .counts_from_joints(&segment.joints[index], &JointMotion::default())
                             .map_err(|e| format!("{}: {e}", segment.name))?
@@ -496,21 +487,13 @@ impl Executor {
 
     /// The parameter set the line is planned with: the newest announced one, else a given
     /// one with offsets (homing offsets alone are not a set the IK server serves).
-    fn line_parameters(&mut self) -> Result<(RobotParams, u64), String> {
-        if let Some(set) = &self.announced {
-            self.in_force = Some(ParamsInForce {
-                params: set.params.clone(),
-                version: Some(set.version),
-            });
-        }
-        match &self.in_force {
-            Some(ParamsInForce {
-                params,
-                version: Some(version),
-            }) => Ok((params.clone(), *version)),
-            _ => Err(
-                "line refused: it needs a calibrated parameter set (none was announced and \
-                 --params has no joint offsets)"
+    fn line_parameters(&self) -> Result<(RobotParams, u64), String> {
+        match (&self.announced, &self.given) {
+            (Some(set), _) => Ok((set.params.clone(), set.version)),
+            (None, Some(params)) => Ok((params.clone(), 0)),
+            (None, None) => Err(
+                "line refused: it needs a calibrated parameter set (none was \
+                 announced and --params has no joint offsets)"
                     .into(),
             ),
         }
@@ -547,6 +530,7 @@ impl Executor {
         Ok(Stage::PlanningLine {
             planner: Box::new(LinePlanner::new(&spec, version, near, now_ns)),
             spec,
+            params: Box::new(params),
             version,
         })
     }
@@ -562,13 +546,9 @@ impl Executor {
     fn line_plan(
         &self,
         spec: &LineSpec,
+        params: &RobotParams,
         waypoints: &[crate::line::SolvedWaypoint],
     ) -> Result<Vec<Segment>, String> {
-        let params = &self
-            .in_force
-            .as_ref()
-            .ok_or("line refused: no parameter set in force")?
-            .params;
         let from = self.current_counts().ok_or("no encoder data")?;
         let approach_speed = 0.5 * self.config.limits.max_speed_rad_s;
         let segments = line_segments(spec, waypoints, params, &from, approach_speed)

@@ -356,7 +356,7 @@ fn an_out_of_limit_line_is_refused_before_any_setpoint() {
     let Outcome::Faulted(reason) = outcome else {
         panic!("{outcome:?}")
     };
-    assert!(reason.starts_with("plan refused before moving"), "{reason}");
+    assert!(reason.starts_with("plan refused"), "{reason}");
     assert!(
         reason.contains("joint 3") && reason.contains("upper limit"),
         "{reason}"
@@ -365,5 +365,29 @@ fn an_out_of_limit_line_is_refused_before_any_setpoint() {
     assert_eq!(
         statuses(&events).last().unwrap(),
         &(MotionState::Faulted, reason)
+    );
+}
+
+#[test]
+fn homing_keeps_a_given_calibrated_set_for_the_line() {
+    let mut rig = Rig::new(6);
+    let mut calibrated = rig.robot.truth().params.clone();
+    calibrated.markers = RobotParams::nominal().markers;
+    let set = ParameterSet::new(calibrated.clone(), 0, Path::new("params.toml"));
+    let mut ik = LocalIk(IkSolver::with_parameters(set));
+    let tasks = vec![Task::Home, Task::PlanLine];
+    let mut executor = Executor::new(config(), calibrated, tasks, T0);
+    let (events, outcome) = run(&mut executor, &mut rig, &mut ik, T0 + 60_000 * MS);
+    assert_eq!(outcome, Outcome::Finished, "{:?}", statuses(&events));
+    let names: Vec<String> = phases(&events).into_iter().map(|p| p.0).collect();
+    assert_eq!(names, [HOMING, LINE_PHASE]);
+    let version = events.iter().find_map(|(_, e)| match e {
+        Event::LinePlanned { version, .. } => Some(*version),
+        _ => None,
+    });
+    assert_eq!(
+        version,
+        Some(0),
+        "planned with the given set, not the homing offsets"
     );
 }

@@ -5,6 +5,10 @@ use sabr_model::{Joints, HOME_JOINTS, JOINT_COUNT};
 
 /// Default travel of each joint from its nominal stop into the workspace (rad).
 pub const DEFAULT_RANGE_RAD: f64 = 0.8;
+/// How far the default box reaches beyond each nominal stop (rad, about 3°): the true stops
+/// differ from the nominal ones by up to about 2°, and a robot resting at its true stop
+/// (after homing) must be inside the box to move away from it.
+pub const STOP_TOLERANCE_RAD: f64 = 0.05;
 /// Default highest joint speed (rad/s).
 pub const DEFAULT_MAX_SPEED_RAD_S: f64 = 0.5;
 /// Rounding allowance of the checks (rad, and relative for speeds).
@@ -28,13 +32,15 @@ pub fn stop_sides(home_stops: &Joints) -> [f64; JOINT_COUNT] {
 }
 
 impl JointLimits {
-    /// The default box: each joint from its nominal stop `range_rad` into the workspace.
+    /// The default box: each joint from [`STOP_TOLERANCE_RAD`] beyond its nominal stop to
+    /// `range_rad` from the stop into the workspace.
     pub fn from_stops(home_stops: &Joints, range_rad: f64, max_speed_rad_s: f64) -> Self {
         let side = stop_sides(home_stops);
+        let near: Joints = std::array::from_fn(|i| home_stops[i] + side[i] * STOP_TOLERANCE_RAD);
         let far: Joints = std::array::from_fn(|i| home_stops[i] - side[i] * range_rad);
         Self {
-            lower: std::array::from_fn(|i| home_stops[i].min(far[i])),
-            upper: std::array::from_fn(|i| home_stops[i].max(far[i])),
+            lower: std::array::from_fn(|i| near[i].min(far[i])),
+            upper: std::array::from_fn(|i| near[i].max(far[i])),
             max_speed_rad_s,
         }
     }
@@ -67,14 +73,14 @@ impl JointLimits {
             }
             if value < self.lower[i] - TOLERANCE {
                 return Err(format!(
-                    "joint {} at {value:.6} rad is below its lower limit {:.6} rad",
+                    "joint {} at {value:.4} rad < lower limit {:.4} rad",
                     i + 1,
                     self.lower[i]
                 ));
             }
             if value > self.upper[i] + TOLERANCE {
                 return Err(format!(
-                    "joint {} at {value:.6} rad is above its upper limit {:.6} rad",
+                    "joint {} at {value:.4} rad > upper limit {:.4} rad",
                     i + 1,
                     self.upper[i]
                 ));
@@ -89,7 +95,7 @@ impl JointLimits {
             let speed = (to[i] - from[i]).abs() / dt_s;
             if speed > self.max_speed_rad_s * (1.0 + TOLERANCE) {
                 return Err(format!(
-                    "joint {} moves at {speed:.4} rad/s, above the speed limit {} rad/s",
+                    "joint {} at {speed:.4} rad/s > speed limit {} rad/s",
                     i + 1,
                     self.max_speed_rad_s
                 ));
@@ -101,7 +107,7 @@ impl JointLimits {
 
 /// Why a plan was refused: where in it and what limit it breaks.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("plan refused before moving: {segment} at {t_s:.3} s: {reason}")]
+#[error("plan refused: {segment} at {t_s:.3} s: {reason}")]
 pub struct PlanRefusal {
     /// The segment where the first violation is.
     pub segment: String,
@@ -159,16 +165,24 @@ mod tests {
         let stops = RobotParams::nominal().joints.home_stops;
         let limits = limits();
         limits.validate().unwrap();
+        let side = stop_sides(&stops);
         for i in 0..JOINT_COUNT {
             assert!(limits.lower[i] <= HOME_JOINTS[i] && HOME_JOINTS[i] <= limits.upper[i]);
-            assert!(stops[i] == limits.lower[i] || stops[i] == limits.upper[i]);
-            assert!((limits.upper[i] - limits.lower[i] - DEFAULT_RANGE_RAD).abs() < 1e-12);
+            let near_end = stops[i] + side[i] * STOP_TOLERANCE_RAD;
+            assert!(
+                (near_end - limits.lower[i]).abs() < 1e-12
+                    || (near_end - limits.upper[i]).abs() < 1e-12
+            );
+            let width = DEFAULT_RANGE_RAD + STOP_TOLERANCE_RAD;
+            assert!((limits.upper[i] - limits.lower[i] - width).abs() < 1e-12);
         }
-        // The stops themselves are inside (homing ends there); beyond them is not.
+        // The stops themselves are inside (homing ends there), and so is a true stop up to
+        // the tolerance beyond; further is not.
         limits.check_pose(&stops).unwrap();
-        let side = stop_sides(&stops);
         let mut beyond = stops;
-        beyond[2] += side[2] * 1e-3;
+        beyond[2] += side[2] * (STOP_TOLERANCE_RAD - 1e-3);
+        limits.check_pose(&beyond).unwrap();
+        beyond[2] += side[2] * 2e-3;
         let reason = limits.check_pose(&beyond).unwrap_err();
         assert!(reason.starts_with("joint 3 at"), "{reason}");
     }
@@ -193,7 +207,8 @@ mod tests {
         let mut path: Vec<Joints> = Vec::new();
         let mut q = start;
         // Joint 4 creeps up at 0.4 rad/s (within the speed limit) until it crosses its upper
-        // limit (the stop at -2.55 rad): the refusal names the first sample beyond it.
+        // limit (0.05 rad beyond the stop at -2.55 rad): the refusal names the first sample
+        // beyond it.
         let crossing = ((limits.upper[3] - start[3]) / (0.4 * PERIOD_S)).ceil() as usize;
         for _ in 0..crossing + 10 {
             q[3] += 0.4 * PERIOD_S;
@@ -205,7 +220,7 @@ mod tests {
         assert!((refusal.t_s - (crossing - 1) as f64 * PERIOD_S).abs() < 1.5 * PERIOD_S);
         assert!(refusal
             .to_string()
-            .starts_with("plan refused before moving: excitation"));
+            .starts_with("plan refused: excitation at "));
     }
 
     #[test]
@@ -219,11 +234,7 @@ mod tests {
         let mut fast = start;
         fast[0] += 1.01 * step;
         let refusal = check_plan(&limits, &start, &[segment("move", vec![fast])]).unwrap_err();
-        assert!(
-            refusal.reason.contains("joint 1 moves at"),
-            "{}",
-            refusal.reason
-        );
+        assert!(refusal.reason.contains("joint 1 at"), "{}", refusal.reason);
         // A jump between two segments is a step too.
         let refusal = check_plan(
             &limits,

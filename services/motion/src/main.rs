@@ -66,7 +66,7 @@ impl Outputs {
         })
     }
 
-    fn status(&mut self, state: MotionState, reason: &str) -> anyhow::Result<()> {
+    fn status(&mut self, now_ns: i64, state: MotionState, reason: &str) -> anyhow::Result<()> {
         self.status_seq += 1;
         match state {
             MotionState::Faulted => tracing::error!(reason, "motion faulted: the robot holds"),
@@ -74,7 +74,7 @@ impl Outputs {
         }
         self.status.send(MotionStatus {
             seq: self.status_seq,
-            t_ns: monotonic_ns(),
+            t_ns: now_ns,
             state,
             reason: FixedString::truncated(reason),
         })?;
@@ -91,7 +91,7 @@ impl Outputs {
                     target_counts,
                 })?;
             }
-            Event::Status { state, reason } => self.status(state, &reason)?,
+            Event::Status { state, reason } => self.status(now_ns, state, &reason)?,
             Event::Phase {
                 name,
                 start_ns,
@@ -181,8 +181,9 @@ fn run(args: &cli::Args) -> anyhow::Result<ExitCode> {
     let (params, tasks, config) = match prepared {
         Ok(prepared) => prepared,
         Err(error) => {
-            outputs.status(MotionState::Faulted, &format!("{error:#}"))?;
-            return Err(error);
+            let reason = format!("{error:#}");
+            outputs.status(monotonic_ns(), MotionState::Faulted, &reason)?;
+            return hold_after_fault(&mut rt, args, reason);
         }
     };
     for task in &tasks {
@@ -226,18 +227,29 @@ fn run(args: &cli::Args) -> anyhow::Result<ExitCode> {
     if exit == Exit::Signal {
         return Ok(ExitCode::SUCCESS);
     }
-    if let Some(reason) = &fault {
-        if args.exit_on_fault {
-            anyhow::bail!("faulted: {reason}");
+    match fault {
+        Some(reason) => hold_after_fault(&mut rt, args, reason),
+        None => {
+            // Finished without ending the graph: hold (the rig keeps the last setpoint) until
+            // stopped.
+            while rt.sleep(IDLE_PERIOD) {}
+            Ok(ExitCode::SUCCESS)
         }
     }
-    // Finished without ending the graph, or faulted: hold (the rig keeps the last setpoint)
-    // until stopped.
-    while rt.sleep(IDLE_PERIOD) {}
-    match fault {
-        Some(reason) => Err(anyhow::anyhow!("faulted: {reason}")),
-        None => Ok(ExitCode::SUCCESS),
+}
+
+/// After a fault (the status says why): exit at once with `--exit-on-fault`, else stay, the
+/// robot holding its last setpoint, until stopped; either way the exit is a failure.
+fn hold_after_fault(
+    rt: &mut NodeRuntime,
+    args: &cli::Args,
+    reason: String,
+) -> anyhow::Result<ExitCode> {
+    if !args.exit_on_fault {
+        rt.ready();
+        while rt.sleep(IDLE_PERIOD) {}
     }
+    Err(anyhow::anyhow!("faulted: {reason}"))
 }
 
 fn main() -> ExitCode {

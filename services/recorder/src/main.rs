@@ -30,7 +30,7 @@ struct Args {
     /// The nominal model written as robot.toml [default: the built-in nominal model].
     #[arg(long, value_name = "FILE")]
     robot_toml: Option<PathBuf>,
-    /// Longest time a written row stays in the recorder's buffers, ms.
+    /// About the longest time a written row stays in the recorder's buffers, ms.
     #[arg(long, value_name = "MS", default_value_t = 50)]
     flush_ms: u64,
     /// Warn when no encoder sample or tracker frame arrives for this long, ms.

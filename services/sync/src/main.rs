@@ -34,7 +34,8 @@ struct Args {
     /// Most tracker frames in the clock fit window.
     #[arg(long, value_name = "N", default_value_t = 1200)]
     window_frames: usize,
-    /// Publish only once the clock line's predicted uncertainty is at most this, µs.
+    /// Publish only once the clock line's predicted uncertainty is at most this, µs (once
+    /// locked, until it exceeds 1.25 times this).
     #[arg(long, value_name = "US", default_value_t = 200.0)]
     max_clock_uncertainty_us: f64,
     /// Largest gap between the two encoder samples interpolated between, ms.
@@ -122,12 +123,6 @@ fn run(args: &Args) -> anyhow::Result<()> {
     if let Some(set) = &initial {
         setting.apply(set);
     }
-    let Some(latency) = setting.current() else {
-        bail!(
-            "no tracker latency: give --latency-ms, or --params with a calibrated \
-             `[calibration] latency_ms`"
-        );
-    };
     let mut matcher = Matcher::new(config, counts_per_rev);
 
     let mut rt = NodeRuntime::start("sync")?;
@@ -136,9 +131,19 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let announcements =
         rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
     let matched = rt.publisher::<MatchedSample>(services::SYNC_MATCHED)?;
+    match setting.current() {
+        Some(latency) => tracing::info!(
+            latency_ms = latency.ns as f64 * 1e-6,
+            source = ?latency.source,
+            "tracker latency"
+        ),
+        None => tracing::warn!(
+            "no tracker latency (--latency-ms, or --params with a calibrated \
+             `[calibration] latency_ms`): no frame is matched until a parameter set with \
+             one is announced"
+        ),
+    }
     tracing::info!(
-        latency_ms = latency.ns as f64 * 1e-6,
-        source = ?latency.source,
         ?counts_per_rev,
         window_frames = config.clock.window,
         max_clock_uncertainty_us = args.max_clock_uncertainty_us,
@@ -239,6 +244,7 @@ struct Watch {
     locked: bool,
     clock: Option<ClockEstimate>,
     warned_drop: bool,
+    warned_no_latency: bool,
     last_status: Instant,
     last_stats: MatchStats,
 }
@@ -253,6 +259,7 @@ impl Watch {
             locked: false,
             clock: None,
             warned_drop: false,
+            warned_no_latency: false,
             last_status: Instant::now(),
             last_stats: MatchStats::default(),
         }
@@ -284,8 +291,13 @@ impl Watch {
                 self.locked = false;
                 tracing::warn!(frame_number, "frame clock fit starts over: {restart}");
             }
-            Err(Unmatched::NoLatency) => {
-                tracing::warn!(frame_number, "no tracker latency known: frame not matched")
+            Err(Unmatched::NoLatency) if !self.warned_no_latency => {
+                self.warned_no_latency = true;
+                tracing::warn!(
+                    frame_number,
+                    "no tracker latency known: frames are not matched (counted in the status \
+                     line)"
+                )
             }
             Err(reason) => tracing::debug!(frame_number, ?reason, "frame not matched"),
         }
@@ -327,6 +339,7 @@ impl Watch {
                 frames = stats.frames - last.frames,
                 matched = stats.matched - last.matched,
                 converging = stats.converging - last.converging,
+                no_latency = stats.no_latency - last.no_latency,
                 timed_out = stats.timed_out - last.timed_out,
                 gaps = stats.gaps - last.gaps,
                 too_old = stats.too_old - last.too_old,

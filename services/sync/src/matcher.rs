@@ -24,9 +24,14 @@ pub struct MatcherConfig {
     /// Longest a frame waits for the encoder sample after its exposure, ns of host time.
     pub match_timeout_ns: i64,
     /// Frames are published only once the clock line's predicted uncertainty is at most
-    /// this, ns (while the fit window fills after a start or restart).
+    /// this, ns (while the fit window fills after a start or restart); once locked, up to
+    /// [`LOCK_HYSTERESIS`] times this, so the noise of the spread estimate does not make the
+    /// output flicker.
     pub max_uncertainty_ns: f64,
 }
+
+/// Factor on [`MatcherConfig::max_uncertainty_ns`] above which a locked clock unlocks.
+pub const LOCK_HYSTERESIS: f64 = 1.25;
 
 impl Default for MatcherConfig {
     /// 3 s of 1 kHz samples, 5 ms span, 100 ms wait, 200 µs clock uncertainty (an error
@@ -120,6 +125,7 @@ pub struct Matcher {
     seq: u64,
     stats: MatchStats,
     last_clock: Option<ClockEstimate>,
+    locked: bool,
 }
 
 impl Matcher {
@@ -134,6 +140,7 @@ impl Matcher {
             seq: 0,
             stats: MatchStats::default(),
             last_clock: None,
+            locked: false,
         }
     }
 
@@ -199,12 +206,18 @@ impl Matcher {
         let clock = match self.clock.observe(frame.frame_number, frame.arrival_t_ns) {
             Observed::Repeated => return Err(Unmatched::Repeated),
             Observed::Learning { frames, restart } => {
-                return Err(Unmatched::Learning { frames, restart })
+                self.locked = false;
+                return Err(Unmatched::Learning { frames, restart });
             }
             Observed::Estimate(estimate) => estimate,
         };
         self.last_clock = Some(clock);
-        if clock.uncertainty_ns > self.config.max_uncertainty_ns {
+        let limit = match self.locked {
+            true => self.config.max_uncertainty_ns * LOCK_HYSTERESIS,
+            false => self.config.max_uncertainty_ns,
+        };
+        self.locked = clock.uncertainty_ns <= limit;
+        if !self.locked {
             return Err(Unmatched::Converging {
                 uncertainty_ns: clock.uncertainty_ns,
                 frames: clock.frames,
@@ -376,7 +389,13 @@ mod tests {
         let (matched, stats) = session(1, 20);
         let first = matched.first().expect("matched after convergence").0;
         assert!(first.quality.clock_frames >= 70, "{first:?}");
-        assert!(stats.converging >= 69, "{stats:?}");
+        // Every frame before the first match was held back, none after it (the lock holds).
+        assert_eq!(
+            stats.converging + 1,
+            u64::from(first.quality.clock_frames),
+            "{stats:?}"
+        );
+        assert_eq!(stats.matched + stats.converging, stats.frames);
         assert_eq!(stats.matched as usize, matched.len());
     }
 

@@ -10,8 +10,8 @@
 //! - the paper's line-length comparison: the commanded length against the length the tracker
 //!   measured (tip from the marker poses through the calibrated model, mean of the start and
 //!   end holds) and the true length;
-//! - each model's tip error along the line from the true encoder counts (nominal, paper
-//!   stepwise, final), the before/after of the calibration on the test motion.
+//! - each model's tip error along the line from the true encoder counts (nominal, the paper's
+//!   stepwise method, final), the before/after of the calibration on the test motion.
 
 use anyhow::{bail, Context};
 use nalgebra::{Point3, Vector3};
@@ -19,7 +19,7 @@ use sabr_calibrator::frames::measured_frames;
 use sabr_calibrator::marker_ik::joints_from_markers;
 use sabr_calibrator::Calibration;
 use sabr_model::{forward, JointMotion, RobotParams};
-use sabr_msgs::{MotorSetpoint, PhaseMark, RigTruth, TrackerFrame};
+use sabr_msgs::{MotionState, MotionStatus, MotorSetpoint, PhaseMark, RigTruth, TrackerFrame};
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
@@ -27,7 +27,8 @@ use super::rows::tracker_rows;
 
 /// Longest hold averaged at each end of the line (ns).
 const MAX_HOLD_NS: i64 = 500_000_000;
-/// Longest wait after the line's phase mark for the truth to cover its end.
+/// Longest wait after the line's phase mark for the truth to cover its end, and after the
+/// motion finished for the line's phase mark.
 const TRUTH_WAIT: Duration = Duration::from_secs(2);
 /// Fewest truth samples in the line phase for an evaluation.
 const MIN_SAMPLES: usize = 5;
@@ -42,6 +43,8 @@ pub struct LineTest {
     setpoints: Vec<MotorSetpoint>,
     frames: Vec<TrackerFrame>,
     phase: Option<(PhaseMark, Instant)>,
+    /// When the motion reported its sessions finished.
+    motion_finished: Option<Instant>,
 }
 
 /// An error statistic over a set of samples (mm).
@@ -66,7 +69,7 @@ impl ErrorStats {
 /// A model's tip error along the line, from the true encoder counts.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModelError {
-    /// `nominal`, `paper (stepwise)` or `calibrated (final)`.
+    /// `nominal`, `stepwise method` or `calibrated (final)`.
     pub model: String,
     /// |FK(model, true counts) − true tip| (mm).
     pub error: ErrorStats,
@@ -109,6 +112,7 @@ impl LineTest {
             setpoints: Vec::new(),
             frames: Vec::new(),
             phase: None,
+            motion_finished: None,
         }
     }
 
@@ -119,7 +123,11 @@ impl LineTest {
 
     /// Keeps a motor setpoint (in time order; an out-of-order one is dropped).
     pub fn setpoint(&mut self, setpoint: MotorSetpoint) {
-        if self.setpoints.last().is_none_or(|s| s.t_ns <= setpoint.t_ns) {
+        if self
+            .setpoints
+            .last()
+            .is_none_or(|s| s.t_ns <= setpoint.t_ns)
+        {
             self.setpoints.push(setpoint);
         }
     }
@@ -136,25 +144,51 @@ impl LineTest {
         }
     }
 
-    /// The evaluation, once the line phase has ended and the truth covers it.
+    /// Follows the motion while waiting for the line: a fault ends the test with an error.
+    pub fn motion_status(&mut self, status: &MotionStatus) -> anyhow::Result<()> {
+        match status.state {
+            MotionState::Faulted => bail!(
+                "the straight-line test did not complete: the motion faulted ({})",
+                status.reason.as_str()
+            ),
+            MotionState::Finished => {
+                self.motion_finished.get_or_insert_with(Instant::now);
+                Ok(())
+            }
+            MotionState::Idle | MotionState::Moving => Ok(()),
+        }
+    }
+
+    /// The evaluation, once the line phase has ended and the truth covers it; an error when
+    /// the motion finished without the line phase.
     pub fn evaluate_when_complete(
         &self,
         calibration: &Calibration,
     ) -> anyhow::Result<Option<LineTestReport>> {
         let Some((mark, seen)) = &self.phase else {
+            if self
+                .motion_finished
+                .is_some_and(|t| t.elapsed() > TRUTH_WAIT)
+            {
+                bail!(
+                    "the motion finished without a `{}` phase: no straight-line test to evaluate",
+                    self.phase_name
+                );
+            }
             return Ok(None);
         };
-        let covered = self
-            .truth
-            .iter()
-            .any(|t| t.exposure_t_ns >= mark.t_end_ns);
+        let covered = self.truth.iter().any(|t| t.exposure_t_ns >= mark.t_end_ns);
         if !covered && seen.elapsed() < TRUTH_WAIT {
             return Ok(None);
         }
         self.evaluate(mark, calibration).map(Some)
     }
 
-    fn evaluate(&self, mark: &PhaseMark, calibration: &Calibration) -> anyhow::Result<LineTestReport> {
+    fn evaluate(
+        &self,
+        mark: &PhaseMark,
+        calibration: &Calibration,
+    ) -> anyhow::Result<LineTestReport> {
         let (start, end) = (mark.t_start_ns, mark.t_end_ns);
         let mut samples: Vec<&RigTruth> = self
             .truth
@@ -181,8 +215,14 @@ impl LineTest {
             .map(|(t, c)| (t - c).norm())
             .collect();
         let hold = MAX_HOLD_NS.min((end - start) / 4);
-        let in_start: Vec<bool> = samples.iter().map(|t| t.exposure_t_ns <= start + hold).collect();
-        let in_end: Vec<bool> = samples.iter().map(|t| t.exposure_t_ns >= end - hold).collect();
+        let in_start: Vec<bool> = samples
+            .iter()
+            .map(|t| t.exposure_t_ns <= start + hold)
+            .collect();
+        let in_end: Vec<bool> = samples
+            .iter()
+            .map(|t| t.exposure_t_ns >= end - hold)
+            .collect();
         let (cmd_a, cmd_b) = (mean(&commanded, &in_start), mean(&commanded, &in_end));
         let (true_a, true_b) = (mean(&truth, &in_start), mean(&truth, &in_end));
         let axis = (cmd_b - cmd_a)
@@ -233,7 +273,10 @@ impl LineTest {
         let params = &calibration.params;
         let geometry = params.effective_geometry();
         let measured_tip = |truth: &RigTruth| -> Option<Point3<f64>> {
-            let frame = self.frames.iter().find(|f| f.frame_number == truth.frame_number)?;
+            let frame = self
+                .frames
+                .iter()
+                .find(|f| f.frame_number == truth.frame_number)?;
             let rows = tracker_rows(frame);
             let (measured, _) = measured_frames(&rows, &params.markers.base_to_robot).ok()?;
             let measured = measured.first()?;
@@ -292,11 +335,14 @@ impl LineTestReport {
     }
 }
 
-/// Tip error of the nominal, paper (stepwise) and final models from the true counts.
-fn model_errors(calibration: &Calibration, samples: &[&RigTruth]) -> anyhow::Result<Vec<ModelError>> {
+/// Tip error of the nominal, stepwise-method and final models from the true counts.
+fn model_errors(
+    calibration: &Calibration,
+    samples: &[&RigTruth],
+) -> anyhow::Result<Vec<ModelError>> {
     let models = [
         ("nominal", &calibration.nominal.robot),
-        ("paper (stepwise)", &calibration.stepwise.robot),
+        ("stepwise method", &calibration.stepwise.robot),
         ("calibrated (final)", &calibration.params),
     ];
     models
@@ -307,10 +353,12 @@ fn model_errors(calibration: &Calibration, samples: &[&RigTruth]) -> anyhow::Res
             let mut errors = Vec::with_capacity(samples.len());
             for truth in samples {
                 if let Some(previous) = previous {
-                    for j in 0..5 {
-                        let change = truth.counts[j] - previous[j];
+                    for ((direction, now), before) in
+                        motion.direction.iter_mut().zip(truth.counts).zip(previous)
+                    {
+                        let change = now - before;
                         if change.abs() > MOTION_DEAD_BAND_COUNTS {
-                            motion.direction[j] = change.signum();
+                            *direction = change.signum();
                         }
                     }
                 }
@@ -328,7 +376,11 @@ fn model_errors(calibration: &Calibration, samples: &[&RigTruth]) -> anyhow::Res
 }
 
 /// The tip (mm, `Bb`) of `params` at fractional `counts`.
-fn tip(params: &RobotParams, counts: &[f64; 5], motion: &JointMotion) -> anyhow::Result<Point3<f64>> {
+fn tip(
+    params: &RobotParams,
+    counts: &[f64; 5],
+    motion: &JointMotion,
+) -> anyhow::Result<Point3<f64>> {
     let joints = params.joints_from_fractional_counts(counts, motion)?;
     Ok(forward(&params.effective_geometry(), &joints)?.tip)
 }
@@ -339,6 +391,8 @@ fn mean(points: &[Point3<f64>], mask: &[bool]) -> Point3<f64> {
         .iter()
         .zip(mask)
         .filter(|(_, &m)| m)
-        .fold((Vector3::zeros(), 0usize), |(s, n), (p, _)| (s + p.coords, n + 1));
+        .fold((Vector3::zeros(), 0usize), |(s, n), (p, _)| {
+            (s + p.coords, n + 1)
+        });
     Point3::from(sum / n.max(1) as f64)
 }

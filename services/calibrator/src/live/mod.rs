@@ -25,7 +25,9 @@ mod rows;
 mod session;
 
 use anyhow::{bail, Context};
-use sabr_calibrator::{calibrate, write_outputs, Calibration, CalibrationError, CalibrationOptions};
+use sabr_calibrator::{
+    calibrate, write_outputs, Calibration, CalibrationError, CalibrationOptions,
+};
 use sabr_msgs::{
     services, EncoderSample, FixedString, MotionState, MotionStatus, MotorSetpoint,
     ParameterSetAnnouncement, PhaseMark, RigTruth, TrackerFrame,
@@ -69,7 +71,12 @@ pub struct Args {
     #[arg(long)]
     line_test: bool,
     /// Phase name of the straight-line test.
-    #[arg(long, value_name = "NAME", default_value = "line", requires = "line_test")]
+    #[arg(
+        long,
+        value_name = "NAME",
+        default_value = "line",
+        requires = "line_test"
+    )]
     line_phase: String,
     /// Announce the graph's job done when finished (after the line test with `--line-test`).
     #[arg(long)]
@@ -79,10 +86,16 @@ pub struct Args {
 /// Runs the live calibrator until its job is done or it is stopped.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     if !(args.tail_timeout_s.is_finite() && args.tail_timeout_s > 0.0) {
-        bail!("--tail-timeout-s {}: must be a positive number", args.tail_timeout_s);
+        bail!(
+            "--tail-timeout-s {}: must be a positive number",
+            args.tail_timeout_s
+        );
     }
     if !(0.0..=1.0).contains(&args.max_lost_fraction) {
-        bail!("--max-lost-fraction {}: must be between 0 and 1", args.max_lost_fraction);
+        bail!(
+            "--max-lost-fraction {}: must be between 0 and 1",
+            args.max_lost_fraction
+        );
     }
     let robot_toml = robot_toml(args.robot_toml.as_deref())?;
     let out = output_dir(args)?;
@@ -94,6 +107,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         session: LiveSession::new(robot_toml),
         stage: Stage::Collecting { tail_since: None },
         line_test: args.line_test.then(|| LineTest::new(&args.line_phase)),
+        last_status: None,
     };
     let inputs = ports.inputs();
     let exit = rt.run_on_data(&inputs, IDLE, |ctx| calibrator.step(ctx, &ports))?;
@@ -199,6 +213,8 @@ struct Calibrator<'a> {
     session: LiveSession,
     stage: Stage,
     line_test: Option<LineTest>,
+    /// The motion's last state and reason, to show changes only.
+    last_status: Option<(MotionState, FixedString<96>)>,
 }
 
 impl Calibrator<'_> {
@@ -209,7 +225,9 @@ impl Calibrator<'_> {
         ports.motion_phases.drain(|mark| marks.push(mark))?;
         ports.rig_phases.drain(|mark| marks.push(mark))?;
         if collecting {
-            ports.encoders.drain(|sample| self.session.encoder(&sample))?;
+            ports
+                .encoders
+                .drain(|sample| self.session.encoder(&sample))?;
         } else {
             ports.encoders.drain(|_| {})?;
         }
@@ -230,25 +248,37 @@ impl Calibrator<'_> {
             frames.iter().for_each(|f| test.frame(*f));
         }
         for mark in &marks {
+            println!(
+                "phase {} done ({:.1} s)",
+                mark.phase.as_str(),
+                (mark.t_end_ns - mark.t_start_ns) as f64 * 1e-9
+            );
             if collecting {
                 self.session.phase(mark);
-                println!(
-                    "phase {} done ({:.1} s)",
-                    mark.phase.as_str(),
-                    (mark.t_end_ns - mark.t_start_ns) as f64 * 1e-9
-                );
             } else if let Some(test) = &mut self.line_test {
                 test.phase(mark);
             }
         }
         let mut statuses = Vec::new();
         ports.status.drain(|status| statuses.push(status))?;
-        if collecting {
-            for status in &statuses {
+        for status in &statuses {
+            self.show_status(status);
+            if collecting {
                 self.check_status(status)?;
+            } else if let Some(test) = &mut self.line_test {
+                test.motion_status(status)?;
             }
         }
         self.advance(ctx, ports)
+    }
+
+    /// Prints the motion's state when it changes (the progress of the session).
+    fn show_status(&mut self, status: &MotionStatus) {
+        let shown = (status.state, status.reason);
+        if self.last_status != Some(shown) {
+            self.last_status = Some(shown);
+            println!("motion {:?}: {}", status.state, status.reason.as_str());
+        }
     }
 
     /// A motion fault or a finished session while the phases are still missing is a refusal.
@@ -350,7 +380,13 @@ impl Calibrator<'_> {
             "session complete: {} encoder samples, {} tracker frames, {} phases; calibrating…",
             stats.encoder_samples, stats.tracker_frames, stats.phases
         );
-        write_json(&self.out.join("live.json"), &LiveReport { streams: stats, version: self.args.version })?;
+        write_json(
+            &self.out.join("live.json"),
+            &LiveReport {
+                streams: stats,
+                version: self.args.version,
+            },
+        )?;
         let worker = std::thread::Builder::new()
             .name("calibrate".into())
             .spawn(move || calibrate(&recording, &CalibrationOptions::default()))
@@ -383,7 +419,10 @@ impl Calibrator<'_> {
         write_text(&self.out.join("summary.txt"), &summary)?;
         tracing::info!(version = self.args.version, path = %params.display(), "parameter set announced");
         self.stage = if self.line_test.is_some() {
-            println!("waiting for the straight-line test (phase {})…", self.args.line_phase);
+            println!(
+                "waiting for the straight-line test (phase {})…",
+                self.args.line_phase
+            );
             Stage::Testing {
                 calibration: Box::new(calibration),
                 summary,

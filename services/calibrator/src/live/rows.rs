@@ -55,3 +55,40 @@ fn reading(tool: Tool, sample: &ToolSample) -> ToolReading {
         },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_becomes_four_rows_in_tool_order_with_its_arrival_stamp() {
+        let seen = ToolSample {
+            status: ToolStatus::Ok,
+            quaternion: [0.5, 0.5, -0.5, 0.5],
+            position_mm: [1.0, -2.0, -900.0],
+            rms_mm: 0.12,
+        };
+        let mut frame = TrackerFrame {
+            seq: 7,
+            arrival_t_ns: 123_456_789,
+            frame_number: 42,
+            tools: [seen; 4],
+        };
+        frame.tools[Tool::Back as usize].status = ToolStatus::Disabled;
+        frame.tools[Tool::Front as usize].status = ToolStatus::Missing;
+        let rows = tracker_rows(&frame);
+        let tools: Vec<_> = rows.iter().map(|r| r.tool.name()).collect();
+        assert_eq!(tools, ["base", "front", "back", "tip"]);
+        assert!(rows.iter().all(|r| r.t_ns == 123_456_789 && r.frame == 42));
+        assert!(matches!(rows[0].reading, ToolReading::Pose { rms, .. } if rms == 0.12));
+        assert_eq!(rows[1].reading, ToolReading::Missing);
+        assert_eq!(rows[2].reading, ToolReading::Missing);
+        assert_eq!(
+            rows[3].reading,
+            ToolReading::Point {
+                position: [1.0, -2.0, -900.0],
+                rms: 0.12
+            }
+        );
+    }
+}

@@ -37,25 +37,43 @@ fn correlate_rows(out: &mut String, rows: &[Correlate]) {
     out.push_str("</table>\n");
 }
 
+/// Colours of the directions of motion: moving down, moving up, unknown.
+const DIRECTION_PALETTE: [&str; 3] = ["#1f5fb4", "#d9730d", "#999999"];
+
 /// Scatter plots of the joint errors against each joint angle, one row per picture, with a
-/// common vertical range per joint.
+/// common vertical range per joint; points and binned means coloured by the joint's
+/// direction of motion (a backlash separates the two directions).
 fn joint_plots(out: &mut String, pictures: &[&ResidualPicture]) {
     for j in 0..5 {
         let all = || pictures.iter().flat_map(|p| p.joint_errors[j].iter());
-        let x_range = svg::padded_range(all().map(|p| p.0));
-        let y_range = svg::padded_range(all().map(|p| p.1));
-        let _ = write!(out, "<div>");
-        for (k, picture) in pictures.iter().enumerate() {
-            let colour = if k == 0 { "#777" } else { "#1f5fb4" };
-            out.push_str(&svg::scatter(
-                &format!("θ{}: {}", j + 1, picture.label),
-                &format!("θ{} (rad)", j + 1),
-                "joint error (mrad)",
-                &picture.joint_errors[j],
-                x_range,
-                y_range,
-                colour,
-            ));
+        let x_range = svg::padded_range(all().map(|p| p.angle));
+        let y_range = svg::padded_range(all().map(|p| p.error_mrad));
+        out.push_str("<div>");
+        for picture in pictures {
+            let points: Vec<(f64, f64, usize)> = picture.joint_errors[j]
+                .iter()
+                .map(|p| (p.angle, p.error_mrad, p.class))
+                .collect();
+            let lines: Vec<(usize, &[(f64, f64)])> = picture.binned_means[j]
+                .iter()
+                .enumerate()
+                .map(|(class, line)| (class, line.as_slice()))
+                .collect();
+            let title = format!("θ{}: {}", j + 1, picture.label);
+            let x_label = format!("θ{} (rad)", j + 1);
+            out.push_str(
+                &svg::Scatter {
+                    title: &title,
+                    x_label: &x_label,
+                    y_label: "joint error (mrad)",
+                    points: &points,
+                    lines: &lines,
+                    palette: &DIRECTION_PALETTE,
+                    x_range,
+                    y_range,
+                }
+                .render(),
+            );
         }
         out.push_str("</div>\n");
     }
@@ -142,7 +160,9 @@ pub fn section(report: &Report) -> String {
     if !pictures.is_empty() {
         out.push_str(
             "<h3>Residual against each joint angle</h3><p>Each point is one tracker frame: the \
-             joint errors that best explain its marker residuals.</p>\n",
+             joint errors that best explain its marker residuals; lines are their means along \
+             the joint angle. Colour: the joint moving down (blue), up (orange), or not yet \
+             moved (grey).</p>\n",
         );
         joint_plots(&mut out, &pictures);
         let colours = ["#777", "#1f5fb4"];

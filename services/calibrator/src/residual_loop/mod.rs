@@ -31,6 +31,7 @@ pub mod html;
 pub mod motion;
 pub mod plots;
 pub mod report;
+mod round;
 pub mod selection;
 pub mod significance;
 mod svg;
@@ -43,18 +44,19 @@ use crate::noise::NoiseModel;
 use crate::observations::{Observation, Phase, SessionData};
 use crate::report::model_residuals;
 use crate::validation::{cross_validated_tip, marker_tip_errors, validation_holds, TipError};
-use crate::CalibrationError;
 
 pub use candidates::Candidate;
 pub use effect_params::{EffectField, EffectParam};
 pub use motion::MotionTrack;
 pub use report::{summary_text, Correlate, EffectReport, FinalReport, StepMetrics};
+pub use round::chi2_threshold;
 
-use candidates::{candidate_columns, link_name, CandidateColumns};
+use candidates::link_name;
 use plots::{picture, Plots};
 use report::{FittedValue, SelectionEvidence, StepSummary};
-use selection::{Design, SetFit, FOLDS};
-use significance::{chi2_quantile, chi2_tail, noise_tests};
+use round::{Evaluation, Round};
+use selection::FOLDS;
+use significance::{chi2_tail, noise_tests};
 
 /// Most effects the loop adds.
 pub const MAX_EFFECTS: usize = 4;
@@ -72,120 +74,6 @@ pub struct Discovery {
     pub effects: Vec<EffectReport>,
     /// The final block.
     pub final_report: FinalReport,
-}
-
-/// A candidate's scores at one fit.
-#[derive(Debug, Clone)]
-struct Evaluation {
-    candidate: Candidate,
-    columns: Vec<usize>,
-    chi2_gain: f64,
-    threshold: f64,
-    held_out_gain: f64,
-    folds_improved: usize,
-    held_out_rms: [f64; 2],
-    coefficients: Vec<f64>,
-    explained_share: f64,
-}
-
-impl Evaluation {
-    fn significant(&self) -> bool {
-        self.chi2_gain >= self.threshold
-            && self.held_out_gain > 0.0
-            && self.folds_improved >= MIN_FOLDS_IMPROVED
-    }
-
-    fn correlate(&self) -> Correlate {
-        Correlate {
-            label: self.candidate.label(),
-            signal: self.candidate.signal().into(),
-            in_library: self.candidate.in_library(),
-            chi2_gain: self.chi2_gain,
-            explained_share: self.explained_share,
-            held_out_gain: self.held_out_gain,
-            significant: self.significant(),
-        }
-    }
-}
-
-/// The threshold of the in-sample gain of a `k`-parameter candidate on `rows` residuals.
-pub fn chi2_threshold(k: usize, rows: usize) -> f64 {
-    let candidates = Candidate::all().len() as f64;
-    (k as f64 * (rows.max(2) as f64).ln()).max(chi2_quantile(SELECTION_LEVEL / candidates, k))
-}
-
-/// The candidates' columns and the linearised problem at one fit.
-struct Round {
-    pool: Vec<Candidate>,
-    columns: CandidateColumns,
-    design: Design,
-    ranges: Vec<Vec<usize>>,
-}
-
-impl Round {
-    fn new(fit: &JointFit, pool: Vec<Candidate>) -> Self {
-        let t = std::time::Instant::now();
-        let columns = candidate_columns(fit, &pool);
-        tracing::debug!(elapsed_s = t.elapsed().as_secs_f64(), "TMP columns");
-        let design = Design::new(fit, &columns.columns);
-        tracing::debug!(elapsed_s = t.elapsed().as_secs_f64(), "TMP design");
-        let mut next = 0;
-        let ranges = pool
-            .iter()
-            .map(|c| {
-                let range: Vec<usize> = (next..next + c.dim()).map(|k| design.extra(k)).collect();
-                next += c.dim();
-                range
-            })
-            .collect();
-        Self {
-            pool,
-            columns,
-            design,
-            ranges,
-        }
-    }
-
-    /// Scores of the pool's candidates `which` on top of the columns `base`.
-    fn evaluate(&self, base: &[usize], which: impl Iterator<Item = usize>) -> Vec<Evaluation> {
-        let Some(without) = self.design.fit(base) else {
-            return Vec::new();
-        };
-        which
-            .filter_map(|k| self.evaluate_one(base, &without, k))
-            .collect()
-    }
-
-    fn evaluate_one(&self, base: &[usize], without: &SetFit, k: usize) -> Option<Evaluation> {
-        let columns = &self.ranges[k];
-        if columns.iter().any(|&c| self.design.is_empty_column(c)) {
-            return None;
-        }
-        let set: Vec<usize> = base.iter().chain(columns).copied().collect();
-        let with = self.design.fit(&set)?;
-        let gains: Vec<f64> = without
-            .fold_sse
-            .iter()
-            .zip(&with.fold_sse)
-            .map(|(a, b)| a - b)
-            .collect();
-        let rows = self.design.rows.max(1) as f64;
-        let candidate = self.pool[k];
-        Some(Evaluation {
-            candidate,
-            columns: columns.clone(),
-            chi2_gain: without.sse - with.sse,
-            threshold: chi2_threshold(candidate.dim(), self.design.rows),
-            held_out_gain: gains.iter().sum(),
-            folds_improved: gains.iter().filter(|g| **g > 0.0).count(),
-            held_out_rms: [
-                (without.held_out() / rows).sqrt(),
-                (with.held_out() / rows).sqrt(),
-            ],
-            coefficients: with.step[base.len()..].to_vec(),
-            explained_share: (without.sse - with.sse) / without.sse.max(f64::MIN_POSITIVE),
-        })
-    }
 }
 
 /// Errors of `fit` on its fitted data, at the held-out validation holds and over the tip
@@ -317,146 +205,183 @@ fn effect_report(
     }
 }
 
-/// Runs the loop on the paper-model fit `paper`. `rest_noise` is the tracker noise measured
-/// on `rest_frames` static frames (the homing dwell). Returns the final fit (the paper fit
-/// when nothing was added) and what was found.
-pub fn discover(
-    session: &SessionData,
-    paper: JointFit,
-    rest_noise: &NoiseModel,
+/// The state of the forward selection.
+struct Search<'a> {
+    session: &'a SessionData,
+    rest_noise: &'a NoiseModel,
     rest_frames: usize,
-) -> Result<(JointFit, Discovery), CalibrationError> {
-    let started = std::time::Instant::now();
-    let mut fit = paper;
-    let mut current = step_metrics("paper model", &fit, session, rest_noise, rest_frames);
-    let mut steps = vec![StepSummary::of(&current)];
-    let mut effects: Vec<EffectReport> = Vec::new();
-    let mut leads: Vec<Correlate> = Vec::new();
-    let mut nuisance: Vec<Candidate> = Vec::new();
-    let mut rejected: Vec<Candidate> = Vec::new();
-    let mut plots = Plots::default();
-    let last_round = loop {
-        let present: Vec<Candidate> = fit
+    fit: JointFit,
+    current: StepMetrics,
+    steps: Vec<StepSummary>,
+    effects: Vec<EffectReport>,
+    leads: Vec<Correlate>,
+    nuisance: Vec<Candidate>,
+    rejected: Vec<Candidate>,
+    plots: Plots,
+}
+
+impl Search<'_> {
+    fn metrics(&self, label: &str, fit: &JointFit) -> StepMetrics {
+        step_metrics(label, fit, self.session, self.rest_noise, self.rest_frames)
+    }
+
+    /// The candidates at the current fit: the probes conditioned on first, then every
+    /// candidate neither in the model, nor conditioned on, nor rejected.
+    fn round(&self) -> Round {
+        let present: Vec<Candidate> = self
+            .fit
             .model
             .robot
             .effects
             .iter()
             .map(Candidate::of_effect)
             .collect();
-        let pool: Vec<Candidate> =
-            nuisance
-                .iter()
-                .copied()
-                .chain(Candidate::all().into_iter().filter(|c| {
-                    !present.contains(c) && !nuisance.contains(c) && !rejected.contains(c)
-                }))
-                .collect();
-        let round = Round::new(&fit, pool);
-        tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "candidates scored");
-        if plots.before.is_none() {
-            plots.before = Some(picture(
-                "paper model",
-                &fit,
-                &round.columns.joint_derivatives,
-                rest_noise,
-            ));
-        }
-        if effects.len() == MAX_EFFECTS {
-            break round;
-        }
+        let open = Candidate::all().into_iter().filter(|c| {
+            !present.contains(c) && !self.nuisance.contains(c) && !self.rejected.contains(c)
+        });
+        Round::new(
+            &self.fit,
+            self.nuisance.iter().copied().chain(open).collect(),
+        )
+    }
+
+    /// The significant candidate with the largest held-out gain, conditioned on the
+    /// probes found so far; probes that win are recorded as leads and conditioned on in
+    /// turn, until a library candidate wins or nothing is significant.
+    fn select(&mut self, round: &Round) -> Option<Evaluation> {
+        let mut conditioned: Vec<usize> = (0..self.nuisance.len()).collect();
         let mut base: Vec<usize> = (0..round.design.fitted).collect();
-        let mut conditioned: Vec<usize> = (0..nuisance.len()).collect();
         for &k in &conditioned {
             base.extend(&round.ranges[k]);
         }
-        let choice = loop {
+        loop {
             let open = (0..round.pool.len()).filter(|k| !conditioned.contains(k));
             let best = round
                 .evaluate(&base, open)
                 .into_iter()
                 .filter(Evaluation::significant)
-                .max_by(|a, b| a.held_out_gain.total_cmp(&b.held_out_gain));
-            match best {
-                Some(probe) if !probe.candidate.in_library() => {
-                    tracing::debug!(
-                        probe = probe.candidate.label(),
-                        gain = probe.chi2_gain,
-                        "structure outside the library"
-                    );
-                    let k = round
-                        .pool
-                        .iter()
-                        .position(|c| *c == probe.candidate)
-                        .unwrap_or(0);
-                    conditioned.push(k);
-                    base.extend(&probe.columns);
-                    nuisance.push(probe.candidate);
-                    leads.push(probe.correlate());
-                }
-                other => break other,
+                .max_by(|a, b| a.held_out_gain.total_cmp(&b.held_out_gain))?;
+            if best.candidate.in_library() {
+                return Some(best);
             }
-        };
-        let Some(choice) = choice else {
-            break round;
-        };
+            tracing::debug!(
+                probe = best.candidate.label(),
+                "structure outside the library"
+            );
+            conditioned.push(best.index);
+            base.extend(&best.columns);
+            self.nuisance.push(best.candidate);
+            self.leads.push(best.correlate());
+        }
+    }
+
+    /// Adds the chosen effect and refits; keeps it if the refit gains as much as the
+    /// selection test demanded, otherwise rejects the candidate.
+    fn try_add(&mut self, choice: &Evaluation) {
         tracing::debug!(
             candidate = choice.candidate.label(),
             gain = choice.chi2_gain,
             "adding an effect"
         );
-        match add_effect(session, &fit, &choice) {
+        match add_effect(self.session, &self.fit, choice) {
             Some(added) if added.refit_gain >= choice.threshold => {
-                let label = format!("+ {}", choice.candidate.label());
-                let after = step_metrics(&label, &added.fit, session, rest_noise, rest_frames);
-                steps.push(StepSummary::of(&after));
-                let before = std::mem::replace(&mut current, after.clone());
-                effects.push(effect_report(&choice, &added, before, after));
-                fit = added.fit;
+                let after = self.metrics(&format!("+ {}", choice.candidate.label()), &added.fit);
+                self.steps.push(StepSummary::of(&after));
+                let before = std::mem::replace(&mut self.current, after.clone());
+                self.effects
+                    .push(effect_report(choice, &added, before, after));
+                self.fit = added.fit;
             }
-            _ => rejected.push(choice.candidate),
+            _ => self.rejected.push(choice.candidate),
+        }
+    }
+
+    /// The final fit and the report, from the last round (at the final fit).
+    fn finish(mut self, last: &Round) -> (JointFit, Discovery) {
+        let derivatives = &last.joint_derivatives;
+        if !self.effects.is_empty() {
+            self.plots.after = Some(picture(
+                "final model",
+                &self.fit,
+                derivatives,
+                self.rest_noise,
+            ));
+        }
+        let fitted: Vec<usize> = (0..last.design.fitted).collect();
+        let mut correlates: Vec<Correlate> = last
+            .evaluate(&fitted, 0..last.pool.len())
+            .iter()
+            .map(Evaluation::correlate)
+            .collect();
+        correlates.sort_by(|a, b| b.chi2_gain.total_cmp(&a.chi2_gain));
+        correlates.truncate(CORRELATES_REPORTED);
+        let residual_is_noise = self.current.noise_test.iter().all(|t| t.is_noise);
+        let effects_added: Vec<String> = self.effects.iter().map(|e| e.label.clone()).collect();
+        let final_report = FinalReport {
+            verdict: verdict(&effects_added, &self.leads, &correlates, residual_is_noise),
+            effects_added,
+            latency_ms: self.fit.model.latency_s * 1e3,
+            steps: self.steps,
+            metrics: self.current,
+            residual_is_noise,
+            structured_residual: !self.leads.is_empty() || !residual_is_noise,
+            leads: self.leads,
+            strongest_correlates: correlates,
+            plots: self.plots,
+        };
+        (
+            self.fit,
+            Discovery {
+                effects: self.effects,
+                final_report,
+            },
+        )
+    }
+}
+
+/// Runs the loop on the paper-model fit `paper`. `rest_noise` is the tracker noise measured
+/// on `rest_frames` static frames (the homing dwell). Returns the final fit (the paper fit
+/// when nothing was added) and what was found. A candidate whose refit fails is rejected,
+/// never an error: the paper fit always stands.
+pub fn discover(
+    session: &SessionData,
+    paper: JointFit,
+    rest_noise: &NoiseModel,
+    rest_frames: usize,
+) -> (JointFit, Discovery) {
+    let started = std::time::Instant::now();
+    let mut search = Search {
+        session,
+        rest_noise,
+        rest_frames,
+        current: step_metrics("paper model", &paper, session, rest_noise, rest_frames),
+        fit: paper,
+        steps: Vec::new(),
+        effects: Vec::new(),
+        leads: Vec::new(),
+        nuisance: Vec::new(),
+        rejected: Vec::new(),
+        plots: Plots::default(),
+    };
+    search.steps.push(StepSummary::of(&search.current));
+    let last = loop {
+        let round = search.round();
+        if search.plots.before.is_none() {
+            let derivatives = &round.joint_derivatives;
+            search.plots.before =
+                Some(picture("paper model", &search.fit, derivatives, rest_noise));
+        }
+        if search.effects.len() == MAX_EFFECTS {
+            break round;
+        }
+        match search.select(&round) {
+            Some(choice) => search.try_add(&choice),
+            None => break round,
         }
     };
-    if !effects.is_empty() {
-        plots.after = Some(picture(
-            "final model",
-            &fit,
-            &last_round.columns.joint_derivatives,
-            rest_noise,
-        ));
-    }
-    let fitted: Vec<usize> = (0..last_round.design.fitted).collect();
-    let mut correlates: Vec<Correlate> = last_round
-        .evaluate(&fitted, 0..last_round.pool.len())
-        .iter()
-        .map(Evaluation::correlate)
-        .collect();
-    correlates.sort_by(|a, b| b.chi2_gain.total_cmp(&a.chi2_gain));
-    correlates.truncate(CORRELATES_REPORTED);
-    let metrics = current;
-    let residual_is_noise = metrics.noise_test.iter().all(|t| t.is_noise);
-    let structured_residual = !leads.is_empty() || !residual_is_noise;
-    let effects_added: Vec<String> = effects.iter().map(|e| e.label.clone()).collect();
-    let verdict = verdict(&effects_added, &leads, &correlates, residual_is_noise);
-    let final_report = FinalReport {
-        effects_added,
-        latency_ms: fit.model.latency_s * 1e3,
-        steps,
-        metrics,
-        residual_is_noise,
-        structured_residual,
-        leads,
-        strongest_correlates: correlates,
-        verdict,
-        plots,
-    };
+    let result = search.finish(&last);
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "residual loop");
-    Ok((
-        fit,
-        Discovery {
-            effects,
-            final_report,
-        },
-    ))
+    result
 }
 
 fn verdict(

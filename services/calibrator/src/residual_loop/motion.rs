@@ -3,14 +3,19 @@
 //!
 //! A joint's direction changes when its count has moved back by at least a dead-band from
 //! the last extremum (so encoder dither of ±1 count at rest never flips it). The calibration
-//! runs on a whole recording, so the change is dated with hindsight: at the middle of the run
-//! of samples at the extremum count, where the motor turned, not when the dead-band was
-//! crossed. Before its first motion a joint's direction is 0 (unknown).
+//! runs on a whole recording, so the change is dated with hindsight, where the motor turned
+//! rather than when the dead-band was crossed: at the middle of the run of samples at the
+//! extremum count for a smooth turn, but no earlier than [`SMOOTH_TURN_HALF_NS`] before the
+//! motor left that count (after a dwell the motor turns when it starts to move again).
+//! Before its first motion a joint's direction is 0 (unknown).
 
 use sabr_model::JointMotion;
 
 /// Counts a joint must move back from its extremum before its direction changes.
 pub const DIRECTION_DEAD_BAND_COUNTS: i64 = 2;
+/// Longest half-duration (ns) of a smooth turn within one count; a longer stay at the
+/// extremum count is a dwell.
+pub const SMOOTH_TURN_HALF_NS: f64 = 1e8;
 
 /// Direction changes of every joint over a recording.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -60,8 +65,11 @@ impl MotionTrack {
                     continue;
                 }
                 if (count - state.extremum).abs() >= dead_band {
-                    let turned_at =
-                        0.5 * (state.first_at_extremum as f64 + state.last_at_extremum as f64);
+                    let (entered, left) = (
+                        state.first_at_extremum as f64,
+                        state.last_at_extremum as f64,
+                    );
+                    let turned_at = (0.5 * (entered + left)).max(left - SMOOTH_TURN_HALF_NS);
                     let direction = (count - state.extremum).signum() as f64;
                     track.changes[joint].push((turned_at, direction));
                     state = JointState {
@@ -128,6 +136,31 @@ mod tests {
         assert_eq!(track.reversals()[1], 2);
         // Joints that never move keep an unknown direction.
         assert_eq!(track.at(2.0e9).direction[0], 0.0);
+    }
+
+    #[test]
+    fn after_a_dwell_the_direction_changes_when_the_motor_moves_again() {
+        // Up to 200 counts by 0.5 s, dwell until 2 s, then back down.
+        let (times, counts) = samples(
+            |t| {
+                if t < 0.5 {
+                    400.0 * t
+                } else if t < 2.0 {
+                    200.0
+                } else {
+                    200.0 - 400.0 * (t - 2.0)
+                }
+            },
+            2_500,
+        );
+        let track = MotionTrack::new(&times, &counts, DIRECTION_DEAD_BAND_COUNTS);
+        assert_eq!(
+            track.at(1.25e9).direction[1],
+            1.0,
+            "the middle of the dwell"
+        );
+        assert_eq!(track.at(1.85e9).direction[1], 1.0);
+        assert_eq!(track.at(2.01e9).direction[1], -1.0);
     }
 
     #[test]

@@ -10,6 +10,10 @@ use crate::residuals::{joint_angles, raw_block_residuals};
 
 /// Most points kept per scatter plot.
 const MAX_POINTS: usize = 800;
+/// Bins of the binned means along each joint angle.
+const MEAN_BINS: usize = 16;
+/// Fewest frames for a binned mean.
+const MIN_BIN_FRAMES: usize = 5;
 /// Histogram range (in units of the tracker noise) and bin width.
 pub const HISTOGRAM_LOW: f64 = -6.0;
 /// Bin width of the histogram.
@@ -21,16 +25,67 @@ const HISTOGRAM_BINS: usize = 48;
 pub struct ResidualPicture {
     /// Model label.
     pub label: String,
-    /// Per joint: `(joint angle rad, joint error mrad)` of each plotted frame, where the
-    /// joint error is the least-squares joint change that would explain the frame's
-    /// residual (both markers seen).
-    pub joint_errors: [Vec<(f64, f64)>; 5],
+    /// Per joint: the plotted frames (a subsample), where the joint error is the
+    /// least-squares joint change that would explain the frame's residual (both markers
+    /// seen).
+    pub joint_errors: [Vec<JointErrorPoint>; 5],
+    /// Per joint and direction of motion ([`JointErrorPoint::class`]): the mean joint error
+    /// (mrad) in bins of the joint angle (rad), over all frames.
+    pub binned_means: [[Vec<(f64, f64)>; 3]; 5],
     /// Density of the whitened residual components in each bin from [`HISTOGRAM_LOW`].
     pub density: Vec<f64>,
     /// Share of components outside the histogram range.
     pub outside: f64,
     /// RMS of the whitened residual components (1 = tracker noise).
     pub whitened_rms: f64,
+}
+
+/// One frame in a joint-error plot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointErrorPoint {
+    /// Joint angle (rad).
+    pub angle: f64,
+    /// Joint error (mrad).
+    pub error_mrad: f64,
+    /// Direction of motion of the joint: 0 moving down, 1 moving up, 2 unknown.
+    pub class: usize,
+}
+
+fn direction_class(direction: f64) -> usize {
+    if direction < 0.0 {
+        0
+    } else if direction > 0.0 {
+        1
+    } else {
+        2
+    }
+}
+
+/// Means of `points` in [`MEAN_BINS`] equal bins of the angle, per direction class; bins
+/// with fewer than [`MIN_BIN_FRAMES`] frames are left out.
+fn binned_means(points: &[JointErrorPoint]) -> [Vec<(f64, f64)>; 3] {
+    let (low, high) = points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.angle), b.max(p.angle))
+        });
+    let width = (high - low) / MEAN_BINS as f64;
+    std::array::from_fn(|class| {
+        if width.is_nan() || width <= 0.0 {
+            return Vec::new();
+        }
+        let mut sums = [(0.0, 0.0, 0usize); MEAN_BINS];
+        for p in points.iter().filter(|p| p.class == class) {
+            let bin = (((p.angle - low) / width) as usize).min(MEAN_BINS - 1);
+            sums[bin].0 += p.angle;
+            sums[bin].1 += p.error_mrad;
+            sums[bin].2 += 1;
+        }
+        sums.iter()
+            .filter(|s| s.2 >= MIN_BIN_FRAMES)
+            .map(|s| (s.0 / s.2 as f64, s.1 / s.2 as f64))
+            .collect()
+    })
 }
 
 /// The pictures before (paper model) and after (final model) the loop.
@@ -50,16 +105,14 @@ pub fn picture(
     joint_derivatives: &DMatrix<f64>,
     rest_noise: &NoiseModel,
 ) -> ResidualPicture {
-    let mut joint_errors: [Vec<(f64, f64)>; 5] = Default::default();
-    let groups: Vec<_> = fit.blocks.chunk_by(|a, b| a.obs == b.obs).collect();
-    let stride = groups.len().div_ceil(MAX_POINTS).max(1);
-    for group in groups.iter().step_by(stride) {
+    let mut all: [Vec<JointErrorPoint>; 5] = Default::default();
+    for group in fit.blocks.chunk_by(|a, b| a.obs == b.obs) {
         if group.len() < 2 {
             continue;
         }
         let mut normal = Matrix5::zeros();
         let mut product = Vector5::zeros();
-        for block in *group {
+        for block in group {
             for row in block.row..block.row + block.quantity.dim() {
                 let d = Vector5::from_fn(|j, _| joint_derivatives[(row, j)]);
                 normal += d * d.transpose();
@@ -69,11 +122,19 @@ pub fn picture(
         let Some(solved) = normal.cholesky().map(|c| c.solve(&product)) else {
             continue;
         };
-        let q = joint_angles(&fit.model, &fit.observations[group[0].obs]);
-        for (j, points) in joint_errors.iter_mut().enumerate() {
-            points.push((q[j], -solved[j] * 1e3));
+        let obs = &fit.observations[group[0].obs];
+        let q = joint_angles(&fit.model, obs);
+        for (j, points) in all.iter_mut().enumerate() {
+            points.push(JointErrorPoint {
+                angle: q[j],
+                error_mrad: -solved[j] * 1e3,
+                class: direction_class(obs.motion.direction[j]),
+            });
         }
     }
+    let binned_means = std::array::from_fn(|j| binned_means(&all[j]));
+    let stride = all[0].len().div_ceil(MAX_POINTS).max(1);
+    let joint_errors = all.map(|points| points.into_iter().step_by(stride).collect());
     let raws = raw_block_residuals(&fit.model, &fit.observations, &fit.blocks);
     let mut counts = vec![0usize; HISTOGRAM_BINS];
     let (mut total, mut outside, mut sum) = (0usize, 0usize, 0.0);
@@ -97,6 +158,7 @@ pub fn picture(
     ResidualPicture {
         label: label.into(),
         joint_errors,
+        binned_means,
         density: counts
             .iter()
             .map(|c| *c as f64 / (n * HISTOGRAM_BIN))

@@ -73,7 +73,8 @@ pub struct EffectReport {
     pub name: String,
     /// Human-readable label, e.g. `transmission_ripple θ2 h1`.
     pub label: String,
-    /// Joint 1..5, for joint-side effects.
+    /// Joint 1..5 (θ1..θ5), for joint-side effects. (The `joint` of the effect in
+    /// `params.toml` is the model's 0-based index.)
     pub joint: Option<usize>,
     /// Link name (`l_f`, `l_fe`, `l_b`, `l_be`, `d_offset`), for link-length errors.
     pub link: Option<String>,

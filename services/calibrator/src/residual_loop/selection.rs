@@ -80,9 +80,21 @@ impl SetFit {
 impl Design {
     /// Builds the design of `fit` (its weighted Jacobian and residual) with `extra` columns.
     pub fn new(fit: &JointFit, extra: &DMatrix<f64>) -> Self {
-        let fitted = fit.jacobian.ncols();
-        let mut columns = DMatrix::zeros(fit.rows, fitted + extra.ncols());
-        columns.columns_mut(0, fitted).copy_from(&fit.jacobian);
+        Self::from_parts(&fit.jacobian, extra, &fit.residual, &fold_of_rows(fit))
+    }
+
+    /// Builds the design of a residual `residual` with fitted columns `jacobian`, `extra`
+    /// columns, and the fold (< [`FOLDS`]) of every row.
+    pub fn from_parts(
+        jacobian: &DMatrix<f64>,
+        extra: &DMatrix<f64>,
+        residual: &DVector<f64>,
+        fold_of_row: &[usize],
+    ) -> Self {
+        let fitted = jacobian.ncols();
+        let rows = residual.len();
+        let mut columns = DMatrix::zeros(rows, fitted + extra.ncols());
+        columns.columns_mut(0, fitted).copy_from(jacobian);
         columns.columns_mut(fitted, extra.ncols()).copy_from(extra);
         let scales: Vec<f64> = columns
             .column_iter()
@@ -92,13 +104,12 @@ impl Design {
         for (k, mut column) in columns.column_iter_mut().enumerate() {
             column /= scales[k];
         }
-        let fold_of_row = fold_of_rows(fit);
         let grams: Vec<Gram> = (0..FOLDS)
             .map(|f| {
-                let rows: Vec<usize> = (0..fit.rows).filter(|&r| fold_of_row[r] == f).collect();
-                let a = columns.select_rows(&rows);
+                let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();
+                let a = columns.select_rows(&selected);
                 let a_t = a.transpose();
-                let r = fit.residual.select_rows(&rows);
+                let r = residual.select_rows(&selected);
                 Gram {
                     rr: r.norm_squared(),
                     gram: &a_t * &a,
@@ -133,7 +144,7 @@ impl Design {
             scales,
             total,
             folds,
-            rows: fit.rows,
+            rows,
         }
     }
 
@@ -181,9 +192,92 @@ fn fold_of_rows(fit: &JointFit) -> Vec<usize> {
     let mut folds = vec![0; fit.rows];
     for block in &fit.blocks {
         let fold = (block.obs * blocks / n) % FOLDS;
-        for row in block.row..block.row + block.quantity.dim() {
-            folds[row] = fold;
-        }
+        folds[block.row..block.row + block.quantity.dim()].fill(fold);
     }
     folds
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Least-squares residual sum of squares of `y` on the columns `x`.
+    fn least_squares_sse(x: &DMatrix<f64>, y: &DVector<f64>) -> (f64, DVector<f64>) {
+        let beta = (x.transpose() * x)
+            .cholesky()
+            .unwrap()
+            .solve(&(x.transpose() * y));
+        ((y - x * &beta).norm_squared(), beta)
+    }
+
+    #[test]
+    fn gains_match_explicit_least_squares_in_sample_and_held_out() {
+        let m = 400;
+        let t = |i: usize| i as f64 / m as f64;
+        // Fitted columns: constant and slope; extra: a sine that is in the data, and noise.
+        let jacobian = DMatrix::from_fn(m, 2, |i, j| if j == 0 { 1.0 } else { t(i) });
+        let extra = DMatrix::from_fn(m, 2, |i, j| {
+            if j == 0 {
+                (17.0 * t(i)).sin()
+            } else {
+                ((i * 7919) % 13) as f64 - 6.0
+            }
+        });
+        let noise = |i: usize| (((i * 104_729) % 97) as f64 / 97.0 - 0.5) * 0.2;
+        let data = DVector::from_fn(m, |i, _| {
+            0.3 + 0.5 * t(i) + 0.8 * (17.0 * t(i)).sin() + noise(i)
+        });
+        // The residual at the fit of the fitted columns (what a converged fit leaves).
+        let (_, beta) = least_squares_sse(&jacobian, &data);
+        let residual = &data - &jacobian * beta;
+        let folds: Vec<usize> = (0..m).map(|i| (i * FOLDS * 4 / m) % FOLDS).collect();
+        let design = Design::from_parts(&jacobian, &extra, &residual, &folds);
+
+        let base = design.fit(&[0, 1]).unwrap();
+        let with = design.fit(&[0, 1, design.extra(0)]).unwrap();
+        let mut x = jacobian.clone().insert_column(2, 0.0);
+        x.set_column(2, &extra.column(0));
+        let (sse_base, _) = least_squares_sse(&jacobian, &data);
+        let (sse_with, beta_with) = least_squares_sse(&x, &data);
+        assert!(
+            (base.sse - sse_base).abs() < 1e-9 * sse_base,
+            "{} {sse_base}",
+            base.sse
+        );
+        assert!(
+            (with.sse - sse_with).abs() < 1e-9 * sse_with,
+            "{} {sse_with}",
+            with.sse
+        );
+        // The columns act as ∂r/∂p = X here, so the step on the sine's parameter is minus
+        // its regression coefficient, in the column's own units.
+        assert!(
+            (with.step[2] + beta_with[2]).abs() < 1e-9,
+            "{:?}",
+            with.step
+        );
+        assert!((with.step[2] + 0.8).abs() < 0.02);
+
+        // Held out: fit on the other folds, predict the fold.
+        for f in [0, 3, 9] {
+            let train: Vec<usize> = (0..m).filter(|&i| folds[i] != f).collect();
+            let test: Vec<usize> = (0..m).filter(|&i| folds[i] == f).collect();
+            let (_, b) = least_squares_sse(&x.select_rows(&train), &data.select_rows(&train));
+            let expected = (data.select_rows(&test) - x.select_rows(&test) * b).norm_squared();
+            assert!(
+                (with.fold_sse[f] - expected).abs() < 1e-8 * expected.max(1.0),
+                "fold {f}"
+            );
+        }
+        assert!(with.held_out() < base.held_out());
+        // A column of noise gains little in sample and loses held out.
+        let noisy = design.fit(&[0, 1, design.extra(1)]).unwrap();
+        assert!(base.sse - noisy.sse < 0.01 * base.sse);
+        assert!(
+            noisy.held_out() > base.held_out(),
+            "{} {}",
+            noisy.held_out(),
+            base.held_out()
+        );
+    }
 }

