@@ -127,7 +127,13 @@ fn run(args: &Args) -> anyhow::Result<()> {
 
     let mut rt = NodeRuntime::start("sync")?;
     let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
-    let frames = rt.subscriber::<TrackerFrame>(services::TRACKER_FRAMES)?;
+    // Frames that arrived before this point are the tracker publisher's history: they only
+    // teach the clock (a restarted sync locks at once instead of after seconds of new frames).
+    let started_ns = monotonic_ns();
+    let frames = rt.subscriber_with_history::<TrackerFrame>(
+        services::TRACKER_FRAMES,
+        services::TRACKER_FRAMES_HISTORY,
+    )?;
     let announcements =
         rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
     let matched = rt.publisher::<MatchedSample>(services::SYNC_MATCHED)?;
@@ -151,6 +157,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     );
 
     let mut watch = Watch::new(stall);
+    let mut history_frames = 0_usize;
     rt.run_on_data(&[&encoders, &frames, &announcements], IDLE, |_ctx| {
         announcements.drain(|a| {
             if let Some(set) = load_announced(&a) {
@@ -189,6 +196,19 @@ fn run(args: &Args) -> anyhow::Result<()> {
         })?;
         let now = monotonic_ns();
         frames.drain(|frame| {
+            if frame.arrival_t_ns < started_ns {
+                history_frames += 1;
+                matcher.learn_clock(frame);
+                return;
+            }
+            if history_frames > 0 {
+                tracing::info!(
+                    frames = history_frames,
+                    clock = ?matcher.last_clock(),
+                    "clock warm-started from the tracker's frame history"
+                );
+                history_frames = 0;
+            }
             watch.tracker.feed();
             let result = matcher.push_frame(frame, setting.current(), now);
             watch.frame_admitted(frame.frame_number, result, matcher.last_clock());

@@ -175,6 +175,18 @@ impl Matcher {
         pushed
     }
 
+    /// Feeds a frame that arrived before this matcher started (publisher history replayed to
+    /// a restarted node) to the clock fit only: its encoder samples are gone, so it is never
+    /// matched, but it lets the clock lock without waiting for new frames. Returns what the
+    /// frame did to the clock.
+    pub fn learn_clock(&mut self, frame: TrackerFrame) -> Observed {
+        let observed = self.clock.observe(frame.frame_number, frame.arrival_t_ns);
+        if let Observed::Estimate(estimate) = observed {
+            self.last_clock = Some(estimate);
+        }
+        observed
+    }
+
     /// Adds a tracker frame received at host time `now_ns`, with the latency in use. On
     /// `Ok` the frame waits for [`Matcher::poll`]; on `Err` it is not matched, for the reason
     /// given.
@@ -397,6 +409,58 @@ mod tests {
         );
         assert_eq!(stats.matched + stats.converging, stats.frames);
         assert_eq!(stats.matched as usize, matched.len());
+    }
+
+    #[test]
+    fn a_matcher_warm_started_from_frame_history_matches_the_first_live_frame() {
+        // A restarted sync: 10 s of frames it missed (history, no encoder data), then live.
+        let restart_ns = 15_000_000_000;
+        let mut matcher = Matcher::new(MatcherConfig::default(), [2000, 2000, 4000, 2000, 2000]);
+        let mut stream = TrackerStream::new(5, 50_000_000.0, 3, LATENCY.ns);
+        let mut live = Vec::new();
+        while live.len() < 10 {
+            let Some(f) = stream.next_frame() else {
+                continue;
+            };
+            if f.arrival_ns < restart_ns {
+                matcher.learn_clock(frame(f.counter, f.arrival_ns));
+            } else {
+                live.push(f);
+            }
+        }
+        assert_eq!(
+            matcher.stats().frames,
+            0,
+            "history is not counted as received"
+        );
+        let encoders = encoder_samples(restart_ns, 1_000_000, 600, 20_000);
+        let mut matched = Vec::new();
+        let mut next_frame = 0;
+        for sample in encoders {
+            while next_frame < live.len() && live[next_frame].arrival_ns <= sample.t_ns {
+                let f = live[next_frame];
+                let pushed =
+                    matcher.push_frame(frame(f.counter, f.arrival_ns), Some(LATENCY), f.arrival_ns);
+                assert_eq!(pushed, Ok(()), "live frame {next_frame} held back");
+                next_frame += 1;
+            }
+            matcher.push_encoder(sample);
+            matcher.poll(sample.t_ns, |r| {
+                if let Ok(m) = r {
+                    matched.push(m);
+                }
+            });
+        }
+        // Only a frame exposed before the first encoder sample can be refused (too old).
+        let stats = matcher.stats();
+        assert!(stats.too_old <= 1, "{stats:?}");
+        assert!(matched.len() >= live.len() - 2, "{stats:?}");
+        for m in &matched {
+            let truth = live.iter().find(|f| f.counter == m.frame_number).unwrap();
+            let error = (m.exposure_t_ns - truth.exposure_ns).abs();
+            assert!(error <= 500_000, "exposure error {error} ns: {m:?}");
+            assert!(m.quality.clock_frames >= 150, "{m:?}");
+        }
     }
 
     #[test]

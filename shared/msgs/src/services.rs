@@ -35,6 +35,21 @@ pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
 /// node (`sabr-test-node`); no production node uses it.
 pub const TEST_COUNTER: &str = "sabr/test/counter";
 
+/// Tracker frames a publisher keeps for late-joining subscribers: 10 s at 20 Hz, so a
+/// restarted `sync` fits the tracker clock from the frames it missed instead of waiting for
+/// new ones. Subscribers ask for it explicitly (`NodeRuntime::subscriber_with_history`).
+pub const TRACKER_FRAMES_HISTORY: usize = 200;
+
+/// How many past samples the publishers of a publish-subscribe service keep for subscribers
+/// that connect later. Every process opens a service with this same value, so whichever opens
+/// it first creates it right. One sample (the latest) unless a service needs more.
+pub fn history_size(service: &str) -> usize {
+    match service {
+        TRACKER_FRAMES => TRACKER_FRAMES_HISTORY,
+        _ => 1,
+    }
+}
+
 /// All publish-subscribe and request-response services above, for listings and checks.
 pub const ALL: [&str; 13] = [
     ENCODER_SAMPLES,
@@ -65,6 +80,18 @@ mod tests {
             assert_eq!(parts.len(), 3, "{name} is not sabr/<producer>/<topic>");
             assert_eq!(parts[0], "sabr");
             assert!(parts[1..].iter().all(|p| !p.is_empty()), "{name}");
+        }
+    }
+
+    #[test]
+    fn only_the_tracker_frames_keep_a_long_history() {
+        for name in ALL {
+            let expected = if name == TRACKER_FRAMES {
+                TRACKER_FRAMES_HISTORY
+            } else {
+                1
+            };
+            assert_eq!(history_size(name), expected, "{name}");
         }
     }
 }

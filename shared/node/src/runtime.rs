@@ -205,6 +205,7 @@ impl NodeRuntime {
             .node
             .service_builder(&service_name(service)?)
             .publish_subscribe::<T>()
+            .history_size(services::history_size(service))
             .open_or_create()
             .map_err(|e| NodeError::port(service, "open service", e))?
             .publisher_builder()
@@ -213,15 +214,29 @@ impl NodeRuntime {
         Ok(Publisher::new(port, self.notifier(service)?, service))
     }
 
-    /// A subscriber of `T` on a publish-subscribe service, woken by its publishers.
+    /// A subscriber of `T` on a publish-subscribe service, woken by its publishers. On
+    /// connecting it receives the publishers' latest sample, if any.
     pub fn subscriber<T: Message>(&self, service: &str) -> Result<Subscriber<T>, NodeError> {
+        self.subscriber_with_history(service, 1)
+    }
+
+    /// A subscriber that, on connecting, first receives up to `history` of the samples each
+    /// publisher sent before (oldest first; at most `services::history_size(service)`), so
+    /// a restarted node can rebuild state from what it missed.
+    pub fn subscriber_with_history<T: Message>(
+        &self,
+        service: &str,
+        history: usize,
+    ) -> Result<Subscriber<T>, NodeError> {
         let port = self
             .node
             .service_builder(&service_name(service)?)
             .publish_subscribe::<T>()
+            .history_size(services::history_size(service))
             .open_or_create()
             .map_err(|e| NodeError::port(service, "open service", e))?
             .subscriber_builder()
+            .history_request(history.min(services::history_size(service)))
             .create()
             .map_err(|e| NodeError::port(service, "create subscriber", e))?;
         Ok(Subscriber::new(port, self.listener(service)?, service))
