@@ -11,7 +11,10 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::ArgGroup;
 use nalgebra::{Point3, Vector3};
-use sabr_model::{forward, inverse, Geometry, JointMotion, Joints, RobotParams, HOME_JOINTS};
+use sabr_model::{
+    forward, inverse, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,
+    DIRECTION_DEAD_BAND_COUNTS, HOME_JOINTS,
+};
 
 /// Arguments of `sabr fk`.
 #[derive(Debug, clap::Args)]
@@ -22,6 +25,8 @@ pub struct FkArgs {
     params: PathBuf,
     /// CSV of encoder counts with header c1,c2,c3,c4,c5 (extra columns are ignored;
     /// fractional counts are accepted). Needs the joint offsets of a calibrated params.toml.
+    /// Rows are read as a time-ordered count history: a calibrated backlash uses each
+    /// joint's direction of its last move of at least 2 counts (none before its first).
     #[arg(long, value_name = "CSV")]
     counts: Option<PathBuf>,
     /// CSV of joint angles (rad) with header q1,q2,q3,q4,q5 (extra columns are ignored).
@@ -71,11 +76,13 @@ pub fn run_fk(args: &FkArgs) -> anyhow::Result<ExitCode> {
     let mut out = output()?;
     out.write_record(POSE_COLUMNS)?;
     let mut failures = 0;
+    let mut directions = DirectionTracker::new(DIRECTION_DEAD_BAND_COUNTS as f64);
     while let Some(values) = reader.next_row()? {
         let values: [f64; 5] = std::array::from_fn(|i| values[i]);
         let q = if from_counts {
+            let motion = directions.update(&values);
             params
-                .joints_from_fractional_counts(&values, &JointMotion::default())
+                .joints_from_fractional_counts(&values, &motion)
                 .map_err(|error| error.to_string())
         } else {
             Ok(values)

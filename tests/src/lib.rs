@@ -13,6 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+/// How long a dropped [`LaunchedGraph`]'s launcher gets to stop its graph before SIGKILL.
+const DROP_STOP_GRACE: Duration = Duration::from_secs(10);
+
 /// Path of a binary of this workspace's target directory (`target/<profile>/<name>`).
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
@@ -192,10 +195,21 @@ impl LaunchedGraph {
 
 impl Drop for LaunchedGraph {
     fn drop(&mut self) {
-        // A failed test must not leave a graph running: the nodes die with the launcher.
-        if matches!(self.launcher.try_wait(), Ok(None)) {
+        // A failed test must not leave a graph running nor its shared memory behind: ask the
+        // launcher to stop (its stop ladder cleans up), kill it only if it does not, then sweep
+        // what dead nodes left and release the domain.
+        if matches!(self.launcher.try_wait(), Ok(None)) && self.interrupt(DROP_STOP_GRACE).is_none()
+        {
             let _ = self.launcher.kill();
             let _ = self.launcher.wait();
         }
+        let observer = self
+            .observer
+            .take()
+            .or_else(|| GraphObserver::new(&self.domain).ok());
+        if let Some(observer) = observer {
+            observer.cleanup_dead_nodes();
+        }
+        sabr_node::release_domain(&self.domain);
     }
 }

@@ -119,12 +119,13 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
             }
             Reading::NoData => bail!("the counter register lost its first latch"),
         }
+        stats.missed_periods = ctx.missed_periods();
         if ctx.tick() % STATUS_PERIOD == STATUS_PERIOD - 1 {
-            stats.log(ctx.missed_periods());
+            stats.log();
         }
         Ok::<_, anyhow::Error>(())
     })?;
-    stats.log(0);
+    stats.log();
     Ok(exit)
 }
 
@@ -137,6 +138,8 @@ struct Stats {
     stale_since: Option<i64>,
     last_sample_ns: Option<i64>,
     max_gap_ns: i64,
+    /// Loop periods missed since start, as counted by the run loop.
+    missed_periods: u64,
 }
 
 impl Stats {
@@ -149,10 +152,10 @@ impl Stats {
         }
     }
 
-    fn log(&mut self, missed_periods: u64) {
+    fn log(&mut self) {
         tracing::info!(
             samples = self.samples,
-            missed_periods,
+            missed_periods = self.missed_periods,
             stale_instants = self.stale_instants,
             max_register_age_us = self.max_age_ns / 1000,
             max_gap_us = self.max_gap_ns / 1000,

@@ -29,6 +29,52 @@ pub struct JointMotion {
     pub direction: [f64; 5],
 }
 
+/// Encoder counts a joint must move back from its last extremum before its direction of
+/// motion changes (the backlash direction rule shared by calibration and `sabr fk`).
+pub const DIRECTION_DEAD_BAND_COUNTS: i64 = 2;
+
+/// Follows the direction of motion of each joint through a time-ordered stream of encoder
+/// counts, as it happens: a joint's direction changes once its count has moved back by at
+/// least a dead-band from its last extremum, so a ±1-count dither at rest never flips it.
+/// Before a joint's first such move its direction is 0 (unknown).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DirectionTracker {
+    dead_band_counts: f64,
+    extremum: Option<[f64; JOINT_COUNT]>,
+    motion: JointMotion,
+}
+
+impl DirectionTracker {
+    /// A tracker that needs a move of `dead_band_counts` (encoder counts, at least 1) to
+    /// start or reverse a joint's direction.
+    pub fn new(dead_band_counts: f64) -> Self {
+        Self {
+            dead_band_counts: dead_band_counts.max(1.0),
+            extremum: None,
+            motion: JointMotion::default(),
+        }
+    }
+
+    /// Takes the next counts (raw, possibly fractional) and returns the motion state there.
+    pub fn update(&mut self, counts: &[f64; JOINT_COUNT]) -> JointMotion {
+        let Some(extremum) = &mut self.extremum else {
+            self.extremum = Some(*counts);
+            return self.motion;
+        };
+        for joint in 0..JOINT_COUNT {
+            let direction = &mut self.motion.direction[joint];
+            let moved = counts[joint] - extremum[joint];
+            if moved * *direction > 0.0 {
+                extremum[joint] = counts[joint];
+            } else if moved.abs() >= self.dead_band_counts {
+                *direction = moved.signum();
+                extremum[joint] = counts[joint];
+            }
+        }
+        self.motion
+    }
+}
+
 /// One effect with its parameters. Joints are indexed 0..5 (θ1 = 0).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -182,6 +228,31 @@ mod tests {
 
     fn apply(effects: &[Effect], direction: [f64; 5]) -> crate::Joints {
         apply_joint_effects(effects, &Q, &MOTOR, &JointMotion { direction })
+    }
+
+    #[test]
+    fn direction_tracker_ignores_dither_and_flips_after_the_dead_band() {
+        let mut tracker = DirectionTracker::new(2.0);
+        let at =
+            |tracker: &mut DirectionTracker, c0: f64| tracker.update(&[c0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(at(&mut tracker, 100.0).direction[0], 0.0);
+        assert_eq!(at(&mut tracker, 101.0).direction[0], 0.0, "dither at rest");
+        assert_eq!(at(&mut tracker, 99.0).direction[0], 0.0, "dither at rest");
+        assert_eq!(at(&mut tracker, 102.0).direction[0], 1.0, "first move");
+        assert_eq!(at(&mut tracker, 110.0).direction[0], 1.0);
+        assert_eq!(
+            at(&mut tracker, 109.0).direction[0],
+            1.0,
+            "within the dead-band"
+        );
+        assert_eq!(at(&mut tracker, 108.0).direction[0], -1.0, "reversed");
+        assert_eq!(at(&mut tracker, 109.0).direction[0], -1.0);
+        assert_eq!(at(&mut tracker, 110.0).direction[0], 1.0);
+        assert_eq!(
+            tracker.update(&[110.0, 1.0, -1.0, 1.0, 0.0]).direction[1..],
+            [0.0; 4][..],
+            "the other joints only dithered"
+        );
     }
 
     #[test]

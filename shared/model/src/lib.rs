@@ -8,7 +8,7 @@ pub mod effects;
 pub mod kinematics;
 pub mod params;
 
-pub use effects::{Effect, JointMotion, Link};
+pub use effects::{DirectionTracker, Effect, JointMotion, Link, DIRECTION_DEAD_BAND_COUNTS};
 pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
 pub use params::{
     CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,

@@ -424,6 +424,7 @@ impl NdiDriver {
     ) -> Result<(RawReply, Instant), DriverError> {
         let deadline = Instant::now() + timeout;
         let mut buf = [0u8; 512];
+        let mut last_look_taken = false;
         loop {
             match self.framer.next_reply() {
                 Some(Ok(raw)) => return Ok((raw, Instant::now())),
@@ -431,8 +432,13 @@ impl NdiDriver {
                 Some(Err(error)) => return Err(self.reply_error(command, error)),
                 None => {}
             }
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
+            let mut left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() && !last_look_taken {
+                // The deadline may have passed while this process was not scheduled: take
+                // one short last look at the port before calling the tracker silent.
+                last_look_taken = true;
+                left = LAST_LOOK;
+            } else if left.is_zero() {
                 self.stats.timeouts += 1;
                 self.framer.discard_pending();
                 return Err(DriverError::Timeout {
@@ -482,6 +488,9 @@ impl Drop for NdiDriver {
         }
     }
 }
+
+/// How long the last look at the port waits once a reply's deadline has passed.
+const LAST_LOOK: Duration = Duration::from_millis(1);
 
 /// Host `CLOCK_MONOTONIC` now, in ns.
 fn monotonic_ns() -> i64 {

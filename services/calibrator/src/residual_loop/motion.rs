@@ -11,8 +11,7 @@
 
 use sabr_model::JointMotion;
 
-/// Counts a joint must move back from its extremum before its direction changes.
-pub const DIRECTION_DEAD_BAND_COUNTS: i64 = 2;
+pub use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 /// Longest half-duration (ns) of a smooth turn within one count; a longer stay at the
 /// extremum count is a dwell.
 pub const SMOOTH_TURN_HALF_NS: f64 = 1e8;
