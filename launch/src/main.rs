@@ -5,6 +5,8 @@ use clap::{Parser, Subcommand};
 mod bench;
 mod calibrate_cmd;
 mod kinematics_cmd;
+mod out_dir;
+mod procfs;
 mod sim_cmd;
 mod soak;
 

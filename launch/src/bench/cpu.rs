@@ -1,8 +1,7 @@
 //! CPU use of a process over a time window, from `/proc/<pid>/stat` (user + system time of
 //! all its threads), e.g. to check that an idle node does not spin.
 
-use anyhow::{bail, Context};
-use nix::unistd::{sysconf, SysconfVar};
+use crate::procfs::{cpu_ticks, ticks_per_second};
 use std::time::{Duration, Instant};
 
 /// CPU use of one process over a window.
@@ -14,39 +13,6 @@ pub struct CpuShare {
     pub resolution: f64,
     /// Wall time the use was measured over.
     pub window: Duration,
-}
-
-/// User + system CPU time of process `pid` so far, in clock ticks (`sysconf(CLK_TCK)` per s).
-pub fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let path = format!("/proc/{pid}/stat");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
-    parse_cpu_ticks(&text).with_context(|| format!("{path}: unexpected content"))
-}
-
-/// `utime + stime` (fields 14 and 15) of a `/proc/<pid>/stat` line. The command name (field 2)
-/// is in parentheses and may hold spaces and `)`, so fields are counted after the last `)`.
-pub fn parse_cpu_ticks(stat: &str) -> anyhow::Result<u64> {
-    let Some((_, after_name)) = stat.rsplit_once(')') else {
-        bail!("no ')' closing the command name");
-    };
-    // After the name come field 3 (state), 4, ...: utime is field 14, i.e. the 12th here.
-    let fields: Vec<&str> = after_name.split_whitespace().collect();
-    let field = |number: usize| -> anyhow::Result<u64> {
-        let text = fields
-            .get(number - 3)
-            .with_context(|| format!("field {number} is missing"))?;
-        text.parse()
-            .with_context(|| format!("field {number} ({text:?}) is not a tick count"))
-    };
-    Ok(field(14)? + field(15)?)
-}
-
-/// Clock ticks per second of the `/proc` CPU times.
-pub fn ticks_per_second() -> anyhow::Result<u64> {
-    match sysconf(SysconfVar::CLK_TCK) {
-        Ok(Some(ticks)) if ticks > 0 => Ok(ticks as u64),
-        other => bail!("sysconf(CLK_TCK) gave {other:?}"),
-    }
 }
 
 /// The CPU use of process `pid` over the next `window` (this call sleeps that long).
@@ -85,22 +51,6 @@ pub fn measure_cpu_shares(pids: &[u32], window: Duration) -> anyhow::Result<Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn parses_utime_and_stime_after_an_odd_command_name() {
-        // pid (comm) state ppid pgrp session tty tpgid flags minflt cminflt majflt cmajflt
-        // utime stime ...
-        let stat = "4242 (a b) c)) S 1 4242 4242 0 -1 4194560 100 0 0 0 37 5 0 0 20 0 1 0";
-        assert_eq!(parse_cpu_ticks(stat).unwrap(), 42);
-    }
-
-    #[test]
-    fn rejects_truncated_or_garbled_lines() {
-        assert!(parse_cpu_ticks("4242 (x) S 1 2").is_err());
-        assert!(parse_cpu_ticks("4242 x S 1 2 3 4 5 6 7 8 9 10 11 12 13").is_err());
-        let error = parse_cpu_ticks("1 (x) S 1 1 1 0 -1 0 0 0 0 0 u 5 0").unwrap_err();
-        assert!(format!("{error:#}").contains("field 14"), "{error:#}");
-    }
 
     #[test]
     fn one_window_serves_several_processes_in_order() {

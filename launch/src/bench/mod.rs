@@ -22,7 +22,7 @@ mod setpoints;
 mod stats;
 mod uds;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 use cpu::CpuShare;
 use payload::{Payload, Transport};
 use sabr_node::Domain;
@@ -92,14 +92,7 @@ impl Settings {
         } else {
             args.only.clone()
         };
-        let bin_dir = match &args.bin_dir {
-            Some(dir) => dir.clone(),
-            None => std::env::current_exe()
-                .context("cannot locate the sabr executable")?
-                .parent()
-                .map(PathBuf::from)
-                .context("the sabr executable has no directory")?,
-        };
+        let bin_dir = sabr::launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
         let graph_cpu_window = Duration::from_secs(if args.quick { 1 } else { 5 });
         let ready_timeout = Duration::from_secs(60);
         Ok(Self {
@@ -175,7 +168,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let settings = Settings::new(args)?;
-    let out = create_out_dir(args.out.clone())?;
+    let out = crate::out_dir::create_out_dir(args.out.clone(), "bench")?;
     let machine = machine::describe();
     println!("sabr bench on {machine}; output in {}", out.display());
     let mut results = Results::default();
@@ -227,32 +220,6 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         out.display()
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// Creates the output directory; an existing one must be empty (nothing is overwritten).
-fn create_out_dir(out: Option<PathBuf>) -> anyhow::Result<PathBuf> {
-    let dir = match out {
-        Some(dir) => dir,
-        None => {
-            let seconds = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs());
-            PathBuf::from("runs").join(format!("bench-{seconds}"))
-        }
-    };
-    if dir.exists() {
-        let mut entries = std::fs::read_dir(&dir)
-            .with_context(|| format!("cannot read the output directory {}", dir.display()))?;
-        if entries.next().is_some() {
-            bail!(
-                "{} is not empty: choose a new output directory",
-                dir.display()
-            );
-        }
-    }
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-    Ok(dir)
 }
 
 /// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards.

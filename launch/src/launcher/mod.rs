@@ -15,7 +15,7 @@ pub use supervisor::StopReason;
 
 use anyhow::Context;
 use sabr_node::Domain;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 use supervisor::Supervisor;
@@ -42,18 +42,24 @@ pub struct LaunchArgs {
     pub check: bool,
 }
 
-/// Runs `sabr launch`: success (0) when the graph was stopped on request, by `--duration` or
-/// because a node announced the job done; failure (1) when a required node ended or could not
-/// be started; an error for a bad launch file or arguments.
-pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
-    let bin_dir = match &args.bin_dir {
-        Some(dir) => dir.clone(),
+/// The directory of the node executables: `dir` when given, else the directory of the running
+/// `sabr` executable (cargo builds them side by side).
+pub fn bin_dir_or_beside_sabr(dir: Option<&Path>) -> anyhow::Result<PathBuf> {
+    match dir {
+        Some(dir) => Ok(dir.to_path_buf()),
         None => std::env::current_exe()
             .context("cannot locate the sabr executable")?
             .parent()
             .map(PathBuf::from)
-            .context("the sabr executable has no directory")?,
-    };
+            .context("the sabr executable has no directory"),
+    }
+}
+
+/// Runs `sabr launch`: success (0) when the graph was stopped on request, by `--duration` or
+/// because a node announced the job done; failure (1) when a required node ended or could not
+/// be started; an error for a bad launch file or arguments.
+pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
+    let bin_dir = bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
     let graph = spec::load(&args.file, &bin_dir)?;
     if args.check {
         println!("{}: valid; start order:", args.file.display());

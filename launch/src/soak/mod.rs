@@ -14,7 +14,6 @@
 mod launcher_child;
 mod monitor;
 mod processes;
-mod procfs;
 mod report;
 mod streams;
 
@@ -134,14 +133,7 @@ struct Live {
 /// Runs `sabr soak`: success if every goal is met, failure (1) otherwise.
 pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     let plan = Plan::new(args)?;
-    let bin_dir = match &args.bin_dir {
-        Some(dir) => dir.clone(),
-        None => std::env::current_exe()
-            .context("cannot locate the sabr executable")?
-            .parent()
-            .map(PathBuf::from)
-            .context("the sabr executable has no directory")?,
-    };
+    let bin_dir = sabr::launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
     let graph = spec::load(&args.graph, &bin_dir)?;
     let domain = Domain::new(
         &args
@@ -153,8 +145,8 @@ pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     if !stale.is_empty() {
         bail!("domain {domain} is in use (iceoryx2 files {stale:?}); choose another with --domain");
     }
-    let out = create_out_dir(args.out.clone())?;
-    let ticks_per_second = procfs::ticks_per_second()?;
+    let out = crate::out_dir::create_out_dir(args.out.clone(), "soak")?;
+    let ticks_per_second = crate::procfs::ticks_per_second()?;
     println!(
         "sabr soak: {} — {} nodes, domain {domain}, window {:.0} s, output {}",
         args.graph.display(),
@@ -324,27 +316,4 @@ fn watch(
 /// True if a process with this pid exists.
 fn process_alive(pid: u32) -> bool {
     nix::sys::signal::kill(nix::unistd::Pid::from_raw(pid as i32), None).is_ok()
-}
-
-/// Creates the output directory; an existing one must be empty (nothing is overwritten).
-fn create_out_dir(out: Option<PathBuf>) -> anyhow::Result<PathBuf> {
-    let dir = match out {
-        Some(dir) => dir,
-        None => {
-            let seconds = std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_secs());
-            PathBuf::from("runs").join(format!("soak-{seconds}"))
-        }
-    };
-    if dir.exists() {
-        let mut entries =
-            std::fs::read_dir(&dir).with_context(|| format!("cannot read {}", dir.display()))?;
-        if entries.next().is_some() {
-            bail!("output directory {} is not empty", dir.display());
-        }
-    }
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    dir.canonicalize()
-        .with_context(|| format!("cannot resolve {}", dir.display()))
 }

@@ -2,7 +2,7 @@
 //! from them: resident memory at start/end/peak, its least-squares slope after the warm-up, and
 //! CPU use.
 
-use super::procfs::{self, ProcReading};
+use crate::procfs::{self, ProcReading};
 
 /// One reading of a process at a time since the soak started.
 #[derive(Debug, Clone, Copy, PartialEq)]

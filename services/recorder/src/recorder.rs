@@ -1,10 +1,8 @@
 //! The live streams turned into recording rows (robot-model.md §7) and written as they come.
 
-use sabr_msgs::{EncoderSample, PhaseMark, ToolSample, ToolStatus, TrackerFrame};
-use sabr_recording::{
-    EncoderRow, FlushPolicy, PhaseRow, RecordingError, RecordingWriter, Tool, ToolReading,
-    TrackerRow,
-};
+use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
+use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
+use sabr_recording::{FlushPolicy, RecordingError, RecordingWriter};
 use std::path::Path;
 
 /// Counters of a recording.
@@ -82,11 +80,7 @@ impl Recorder {
             Continuity::Restarted => self.stats.encoder_restarts += 1,
             Continuity::InSequence => {}
         }
-        let row = EncoderRow {
-            t_ns: sample.t_ns,
-            counts: sample.counts,
-        };
-        let written = self.writer.write_encoder(&row);
+        let written = self.writer.write_encoder(&encoder_row(sample));
         self.count(written)?;
         self.stats.encoder_rows += 1;
         Ok(continuity)
@@ -96,13 +90,7 @@ impl Recorder {
     /// row does not stop the other tools' rows; the first refusal is returned.
     pub fn frame(&mut self, frame: &TrackerFrame) -> Result<(), RecordingError> {
         let mut first_error = None;
-        for (tool, sample) in Tool::ALL.into_iter().zip(&frame.tools) {
-            let row = TrackerRow {
-                t_ns: frame.arrival_t_ns,
-                frame: frame.frame_number,
-                tool,
-                reading: reading(tool, sample),
-            };
+        for row in tracker_rows(frame) {
             let written = self.writer.write_tracker(&row);
             if let Err(error) = self.count(written) {
                 first_error.get_or_insert(error);
@@ -114,12 +102,7 @@ impl Recorder {
 
     /// Appends a phase.
     pub fn phase(&mut self, mark: &PhaseMark) -> Result<(), RecordingError> {
-        let row = PhaseRow {
-            t_start_ns: mark.t_start_ns,
-            t_end_ns: mark.t_end_ns,
-            phase: mark.phase.as_str().to_owned(),
-        };
-        let written = self.writer.write_phase(&row);
+        let written = self.writer.write_phase(&phase_row(mark));
         self.count(written)?;
         self.stats.phase_rows += 1;
         Ok(())
@@ -144,28 +127,11 @@ impl Recorder {
     }
 }
 
-/// A tool's reading as recorded: a pose for the markers, a point for the tip. Format v1 has
-/// no `disabled` status: a tool not enabled on the tracker is recorded as `missing`.
-fn reading(tool: Tool, sample: &ToolSample) -> ToolReading {
-    match sample.status {
-        ToolStatus::Ok if tool == Tool::Tip => ToolReading::Point {
-            position: sample.position_mm,
-            rms: sample.rms_mm,
-        },
-        ToolStatus::Ok => ToolReading::Pose {
-            quaternion: sample.quaternion,
-            position: sample.position_mm,
-            rms: sample.rms_mm,
-        },
-        ToolStatus::Missing | ToolStatus::Disabled => ToolReading::Missing,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sabr_msgs::FixedString;
-    use sabr_recording::Recording;
+    use sabr_msgs::{FixedString, ToolSample, ToolStatus};
+    use sabr_recording::{Recording, Tool, ToolReading};
     use std::num::NonZeroUsize;
 
     fn encoder(seq: u64) -> EncoderSample {

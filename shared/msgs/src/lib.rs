@@ -14,6 +14,7 @@
 mod fixed_string;
 mod graph;
 mod motion;
+pub mod rows;
 mod sensing;
 pub mod services;
 

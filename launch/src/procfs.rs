@@ -1,4 +1,5 @@
-//! Memory and CPU time of a process from `/proc/<pid>/status` and `/proc/<pid>/stat`.
+//! Memory and CPU time of a process from `/proc/<pid>/status` and `/proc/<pid>/stat`, for the
+//! bench's idle-CPU windows and the soak's memory and CPU trends.
 
 use anyhow::{bail, Context};
 use nix::unistd::{sysconf, SysconfVar};
@@ -24,6 +25,13 @@ pub fn read(pid: u32) -> anyhow::Result<ProcReading> {
         rss_kib: parse_vm_rss_kib(&status).with_context(|| status_path.clone())?,
         cpu_ticks: parse_cpu_ticks(&stat).with_context(|| stat_path.clone())?,
     })
+}
+
+/// User + system CPU time of process `pid` so far, in clock ticks (`sysconf(CLK_TCK)` per s).
+pub fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
+    let path = format!("/proc/{pid}/stat");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
+    parse_cpu_ticks(&text).with_context(|| format!("{path}: unexpected content"))
 }
 
 /// Clock ticks per second of the `/proc` CPU times (`sysconf(CLK_TCK)`).
@@ -88,6 +96,9 @@ mod tests {
         assert!(parse_vm_rss_kib("VmRSS:\t12 MB\n").is_err());
         assert!(parse_cpu_ticks("42 (x S 1").is_err());
         assert!(parse_cpu_ticks("42 (x) S 1 2").is_err());
+        assert!(parse_cpu_ticks("4242 x S 1 2 3 4 5 6 7 8 9 10 11 12 13").is_err());
+        let error = parse_cpu_ticks("1 (x) S 1 1 1 0 -1 0 0 0 0 0 u 5 0").unwrap_err();
+        assert!(format!("{error:#}").contains("field 14"), "{error:#}");
     }
 
     #[test]

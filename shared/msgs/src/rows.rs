@@ -1,7 +1,7 @@
-//! The live messages as recording rows (robot-model.md §7), exactly as `sabr-recorder` writes
-//! them, so that the session the live calibrator holds in memory is the recording on disk.
+//! The live messages as recording rows (robot-model.md §7): the one conversion `sabr-recorder`
+//! writes to disk and the live calibrator keeps in memory, so both hold the same session.
 
-use sabr_msgs::{EncoderSample, PhaseMark, Tool, ToolSample, ToolStatus, TrackerFrame};
+use crate::{EncoderSample, PhaseMark, Tool, ToolSample, ToolStatus, TrackerFrame};
 use sabr_recording::{EncoderRow, PhaseRow, ToolReading, TrackerRow};
 
 /// `encoders.csv` row of an encoder sample: its host stamp and raw counts.
@@ -32,7 +32,8 @@ pub fn phase_row(mark: &PhaseMark) -> PhaseRow {
     }
 }
 
-fn recording_tool(tool: Tool) -> sabr_recording::Tool {
+/// The recording's name for a tracker tool.
+pub fn recording_tool(tool: Tool) -> sabr_recording::Tool {
     match tool {
         Tool::Base => sabr_recording::Tool::Base,
         Tool::Front => sabr_recording::Tool::Front,
@@ -41,6 +42,8 @@ fn recording_tool(tool: Tool) -> sabr_recording::Tool {
     }
 }
 
+/// A tool's reading as recorded: a pose for the markers, a point for the tip. Format v1 has
+/// no `disabled` status: a tool not enabled on the tracker is recorded as `missing`.
 fn reading(tool: Tool, sample: &ToolSample) -> ToolReading {
     match (sample.status, tool) {
         (ToolStatus::Missing | ToolStatus::Disabled, _) => ToolReading::Missing,
