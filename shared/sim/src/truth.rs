@@ -75,6 +75,25 @@ pub struct ThermalDrift {
 }
 
 impl ThermalDrift {
+    /// The thermal drifts among the injected `effects`, in their order.
+    pub fn all_in(effects: &[SimEffect]) -> Vec<ThermalDrift> {
+        effects
+            .iter()
+            .filter_map(|e| match *e {
+                SimEffect::Thermal {
+                    joint,
+                    amplitude,
+                    tau_s,
+                } => Some(ThermalDrift {
+                    joint,
+                    amplitude,
+                    tau_s,
+                }),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Drift (rad) at `t_ns` after power-up.
     pub fn drift_at(&self, t_ns: i64) -> f64 {
         self.amplitude * (1.0 - (-(t_ns as f64) * 1e-9 / self.tau_s).exp())
@@ -224,21 +243,7 @@ impl RobotTruth {
             .iter()
             .filter_map(|e| e.model_effect().cloned())
             .collect();
-        let thermal = effects
-            .iter()
-            .filter_map(|e| match *e {
-                SimEffect::Thermal {
-                    joint,
-                    amplitude,
-                    tau_s,
-                } => Some(ThermalDrift {
-                    joint,
-                    amplitude,
-                    tau_s,
-                }),
-                _ => None,
-            })
-            .collect();
+        let thermal = ThermalDrift::all_in(effects);
         let nominal_stops = nominal.joints.home_stops;
         Ok(RobotTruth {
             params,

@@ -175,21 +175,7 @@ impl Truth {
                 line: 0,
                 reason: e.to_string(),
             })?;
-        let thermal = effects
-            .iter()
-            .filter_map(|e| match *e {
-                SimEffect::Thermal {
-                    joint,
-                    amplitude,
-                    tau_s,
-                } => Some(ThermalDrift {
-                    joint,
-                    amplitude,
-                    tau_s,
-                }),
-                _ => None,
-            })
-            .collect();
+        let thermal = ThermalDrift::all_in(&effects);
         let t = &file.tracker;
         let tracker = TrackerTruth {
             tracker_from_base: Isometry3::from_parts(
