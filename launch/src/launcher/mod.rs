@@ -11,7 +11,7 @@ pub mod spec;
 mod supervisor;
 
 pub use run_dir::RunDir;
-pub use supervisor::StopReason;
+pub use supervisor::{describe, StopReason};
 
 use anyhow::Context;
 use sabr_node::Domain;

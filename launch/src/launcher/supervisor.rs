@@ -494,7 +494,7 @@ fn wait_exit(child: &mut Child, grace: Duration) -> Option<ExitStatus> {
 }
 
 /// "exit code 3" or "killed by SIGKILL".
-fn describe(status: ExitStatus) -> String {
+pub fn describe(status: ExitStatus) -> String {
     match (status.code(), status.signal()) {
         (Some(code), _) => format!("exit code {code}"),
         (None, Some(signal)) => match Signal::try_from(signal) {

@@ -4,7 +4,6 @@ use anyhow::Context;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use std::ffi::OsString;
-use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
@@ -67,17 +66,5 @@ impl LauncherChild {
 impl Drop for LauncherChild {
     fn drop(&mut self) {
         self.stop(STOP_TIMEOUT);
-    }
-}
-
-/// "exit code 0" or "killed by SIGKILL".
-pub fn describe(status: ExitStatus) -> String {
-    match (status.code(), status.signal()) {
-        (Some(code), _) => format!("exit code {code}"),
-        (None, Some(signal)) => match Signal::try_from(signal) {
-            Ok(signal) => format!("killed by {signal}"),
-            Err(_) => format!("killed by signal {signal}"),
-        },
-        (None, None) => "ended".to_owned(),
     }
 }

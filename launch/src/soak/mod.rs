@@ -18,9 +18,10 @@ mod report;
 mod streams;
 
 use anyhow::{bail, Context};
-use launcher_child::{describe, LauncherChild};
+use launcher_child::LauncherChild;
 use monitor::Monitor;
 use report::{Goals, Outcome, SoakCsv};
+use sabr::launcher::describe;
 use sabr::launcher::spec;
 use sabr_node::Domain;
 use std::ffi::OsString;

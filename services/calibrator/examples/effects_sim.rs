@@ -6,8 +6,9 @@
 //! e.g. `... -- 3 0.25 ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.4`. With
 //! `EFFECTS_OUT=DIR` the calibration outputs are written to DIR.
 
-use sabr_calibrator::residual_loop::motion::{MotionTrack, DIRECTION_DEAD_BAND_COUNTS};
+use sabr_calibrator::residual_loop::motion::MotionTrack;
 use sabr_calibrator::{calibrate, CalibrationOptions};
+use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
 use sabr_recording::Recording;
 use sabr_sim::{record_session, SimConfig, SimEffect, Truth};

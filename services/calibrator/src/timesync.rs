@@ -4,9 +4,10 @@
 use sabr_model::JointMotion;
 use sabr_recording::EncoderRow;
 
-use crate::residual_loop::motion::{MotionTrack, DIRECTION_DEAD_BAND_COUNTS};
+use crate::residual_loop::motion::MotionTrack;
 use crate::stats::{huber_weight, median, robust_scale, weighted_line};
 use crate::CalibrationError;
+use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 
 /// Fewest tracker frames for a clock fit.
 const MIN_FRAMES: usize = 10;

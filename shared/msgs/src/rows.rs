@@ -33,7 +33,7 @@ pub fn phase_row(mark: &PhaseMark) -> PhaseRow {
 }
 
 /// The recording's name for a tracker tool.
-pub fn recording_tool(tool: Tool) -> sabr_recording::Tool {
+fn recording_tool(tool: Tool) -> sabr_recording::Tool {
     match tool {
         Tool::Base => sabr_recording::Tool::Base,
         Tool::Front => sabr_recording::Tool::Front,

@@ -11,7 +11,6 @@
 
 use sabr_model::JointMotion;
 
-pub use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 /// Longest half-duration (ns) of a smooth turn within one count; a longer stay at the
 /// extremum count is a dwell.
 pub const SMOOTH_TURN_HALF_NS: f64 = 1e8;
@@ -107,6 +106,7 @@ impl MotionTrack {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 
     /// Samples 1 ms apart of a joint moving as `counts(t)` on joint 2 only.
     fn samples(count: impl Fn(f64) -> f64, n: usize) -> (Vec<i64>, Vec<[i64; 5]>) {

@@ -6,9 +6,10 @@
 #![allow(dead_code)]
 
 use sabr_calibrator::joint_fit::joint_fit;
-use sabr_calibrator::residual_loop::motion::{MotionTrack, DIRECTION_DEAD_BAND_COUNTS};
+use sabr_calibrator::residual_loop::motion::MotionTrack;
 use sabr_calibrator::residual_loop::EffectReport;
 use sabr_calibrator::{calibrate, Calibration, CalibrationOptions, ParamLayout};
+use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
 use sabr_recording::Recording;
 use sabr_sim::{record_session, SimConfig, Truth};
