@@ -3,7 +3,7 @@
 
 use super::stats::{duration_ns, Measurement};
 use anyhow::{bail, Context};
-use sabr_calibrator::{calibrate, write_outputs, CalibrationOptions};
+use sabr_calibration::{calibrate, write_outputs, CalibrationOptions};
 use sabr_model::{forward, inverse, Geometry, Joints, RobotParams, HOME_JOINTS};
 use sabr_recording::Recording;
 use sabr_sim::{record_session, write_session, SimConfig};

@@ -3,7 +3,7 @@
 //! It listens to the raw streams the recorder writes (encoder samples, tracker frames, the
 //! motion's phase marks), keeps them as the same recording rows in memory, and once the
 //! calibration phases (homing, excitation, tip, validation) are complete calibrates with the
-//! library ([`sabr_calibrator::calibrate`], the code path of `sabr calibrate`, residual loop
+//! library ([`sabr_calibration::calibrate`], the code path of `sabr calibrate`, residual loop
 //! included). It writes `params.toml`, `report.json` and `report.html` atomically into
 //! `$SABR_RUN_DIR/calibration/` and announces the new parameter set on
 //! `sabr/calibrator/parameters`. With `--line-test` it then evaluates the straight-line test

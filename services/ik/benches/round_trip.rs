@@ -1,7 +1,7 @@
 //! Round trip of the IK server process and its idle CPU, in a private domain:
 //!
 //! ```text
-//! cargo bench -p sabr-ik --bench round_trip [-- --requests 20000]
+//! cargo bench -p sabr-ik-service --bench round_trip [-- --requests 20000]
 //! ```
 //!
 //! Prints the in-process solve time, the request → response round trip through `sabr-ik`

@@ -1,7 +1,7 @@
 //! The tracker's exposure clock, estimated online: a robust line through the tracker's frame
 //! counter and the host arrival stamps of the most recent frames.
 //!
-//! The line is the same one the calibrator fits offline (`sabr_calibrator::timesync::ClockFit`):
+//! The line is the same one the calibrator fits offline (`sabr_calibration::timesync::ClockFit`):
 //! the slope starts at the median per-tick interval (robust to skipped frames and counter
 //! increments ≠ 1), then iteratively reweighted least squares with a Huber loss on the MAD
 //! scale refine it (robust to jitter and to late frames, which only ever arrive late). The

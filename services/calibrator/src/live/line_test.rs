@@ -15,9 +15,9 @@
 
 use anyhow::{bail, Context};
 use nalgebra::{Point3, Vector3};
-use sabr_calibrator::frames::measured_frames;
-use sabr_calibrator::marker_ik::joints_from_markers;
-use sabr_calibrator::Calibration;
+use sabr_calibration::frames::measured_frames;
+use sabr_calibration::marker_ik::joints_from_markers;
+use sabr_calibration::Calibration;
 use sabr_model::{forward, JointMotion, RobotParams};
 use sabr_msgs::{MotionState, MotionStatus, MotorSetpoint, PhaseMark, RigTruth, TrackerFrame};
 use serde::Serialize;

@@ -5,10 +5,10 @@
 // Each test crate uses a subset of these helpers.
 #![allow(dead_code)]
 
-use sabr_calibrator::joint_fit::joint_fit;
-use sabr_calibrator::residual_loop::motion::MotionTrack;
-use sabr_calibrator::residual_loop::EffectReport;
-use sabr_calibrator::{calibrate, Calibration, CalibrationOptions, ParamLayout};
+use sabr_calibration::joint_fit::joint_fit;
+use sabr_calibration::residual_loop::motion::MotionTrack;
+use sabr_calibration::residual_loop::EffectReport;
+use sabr_calibration::{calibrate, Calibration, CalibrationOptions, ParamLayout};
 use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
 use sabr_recording::Recording;

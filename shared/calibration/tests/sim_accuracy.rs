@@ -1,17 +1,17 @@
 //! Calibration of simulated sessions against the simulator's truth (issue 4, "must show").
 //!
 //! Heavy (a 5-minute session per seed): ignored in debug builds; run with
-//! `cargo test --release -p sabr-calibrator --test sim_accuracy`.
+//! `cargo test --release -p sabr-calibration --test sim_accuracy`.
 
 mod common;
 
 use common::{rms, session, truth_tip_errors};
-use sabr_calibrator::{calibrate, CalibrationOptions};
+use sabr_calibration::{calibrate, CalibrationOptions};
 
 #[test]
 #[cfg_attr(
     debug_assertions,
-    ignore = "heavy: cargo test --release -p sabr-calibrator"
+    ignore = "heavy: cargo test --release -p sabr-calibration"
 )]
 fn five_clean_seeds_meet_the_accuracy_goals() {
     for seed in 1..=5 {
@@ -79,6 +79,6 @@ fn five_clean_seeds_meet_the_accuracy_goals() {
             .fit
             .observations
             .iter()
-            .all(|o| o.phase != sabr_calibrator::observations::Phase::Validation));
+            .all(|o| o.phase != sabr_calibration::observations::Phase::Validation));
     }
 }

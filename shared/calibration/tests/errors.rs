@@ -4,7 +4,7 @@
 mod common;
 
 use common::session;
-use sabr_calibrator::{calibrate, CalibrationError, CalibrationOptions};
+use sabr_calibration::{calibrate, CalibrationError, CalibrationOptions};
 use sabr_recording::{Recording, Tool, ToolReading};
 
 fn short_recording() -> Recording {

@@ -3,7 +3,7 @@
 //! the effect (issue 5). One test per effect class the simulator can inject.
 //!
 //! Release only (each calibrates two or three simulated sessions):
-//! `cargo test --release -p sabr-calibrator --test effects_library`.
+//! `cargo test --release -p sabr-calibration --test effects_library`.
 
 mod effects_support;
 

@@ -2,7 +2,7 @@
 //! reported as structured residual with its strongest correlates, and no library effect is
 //! claimed for it (issue 5).
 //!
-//! Release only: `cargo test --release -p sabr-calibrator --test effects_outside`.
+//! Release only: `cargo test --release -p sabr-calibration --test effects_outside`.
 
 mod effects_support;
 

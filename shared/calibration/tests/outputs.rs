@@ -4,13 +4,13 @@
 mod common;
 
 use common::session;
-use sabr_calibrator::{calibrate, write_outputs, CalibrationOptions};
+use sabr_calibration::{calibrate, write_outputs, CalibrationOptions};
 use sabr_model::{forward, JointMotion, RobotParams};
 
 #[test]
 #[cfg_attr(
     debug_assertions,
-    ignore = "heavy: cargo test --release -p sabr-calibrator"
+    ignore = "heavy: cargo test --release -p sabr-calibration"
 )]
 fn params_toml_report_json_and_html_are_written_and_consistent() {
     let (recording, _truth) = session(11, 0.4);

@@ -3,13 +3,13 @@
 //! the outputs, each run in a fresh child process so that the memory figure is the
 //! calibration's alone; plus the accuracy against the simulator's truth.
 //!
-//! `cargo bench -p sabr-calibrator --bench calibrate [-- SEED [RUNS]]`
+//! `cargo bench -p sabr-calibration --bench calibrate [-- SEED [RUNS]]`
 
 use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use sabr_calibrator::{calibrate, write_outputs, CalibrationOptions};
+use sabr_calibration::{calibrate, write_outputs, CalibrationOptions};
 use sabr_model::{forward, JointMotion, RobotParams};
 use sabr_recording::Recording;
 use sabr_sim::{record_session, write_session, SimConfig};

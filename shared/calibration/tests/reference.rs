@@ -8,9 +8,9 @@
 //! moves a result by a meaningful amount fails, while rounding differences pass.
 //!
 //! Release only (eleven 5-minute sessions):
-//! `cargo test --release -p sabr-calibrator --test reference`.
+//! `cargo test --release -p sabr-calibration --test reference`.
 
-use sabr_calibrator::{calibrate, Calibration, CalibrationOptions};
+use sabr_calibration::{calibrate, Calibration, CalibrationOptions};
 use sabr_sim::{record_session, SimConfig};
 use serde_json::Value;
 
@@ -42,7 +42,9 @@ fn calibrated(case: &Value) -> Calibration {
 }
 
 fn number(value: &Value) -> f64 {
-    value.as_f64().unwrap_or_else(|| panic!("{value} is not a number"))
+    value
+        .as_f64()
+        .unwrap_or_else(|| panic!("{value} is not a number"))
 }
 
 fn assert_close(what: &str, found: f64, expected: f64, sigma: f64) {
@@ -66,7 +68,11 @@ fn check(name: &str) {
     );
 
     let expected = case["parameters"].as_object().expect("parameters");
-    assert_eq!(report.parameters.len(), expected.len(), "{name}: parameters");
+    assert_eq!(
+        report.parameters.len(),
+        expected.len(),
+        "{name}: parameters"
+    );
     for row in &report.parameters {
         let values = expected[&row.name].as_array().expect("triple");
         let sigma = number(&values[2]);
@@ -86,7 +92,11 @@ fn check(name: &str) {
 
     let found = case["effects_found"].as_array().expect("effects_found");
     let labels: Vec<String> = report.effects.iter().map(|e| e.label.clone()).collect();
-    assert_eq!(report.effects.len(), found.len(), "{name}: effects {labels:?}");
+    assert_eq!(
+        report.effects.len(),
+        found.len(),
+        "{name}: effects {labels:?}"
+    );
     for (effect, expected) in report.effects.iter().zip(found) {
         assert_eq!(effect.name, expected["name"].as_str().unwrap(), "{name}");
         assert_eq!(
@@ -114,7 +124,12 @@ fn check(name: &str) {
         "{name}: params.toml effects"
     );
 
-    let leads: Vec<&str> = report.r#final.leads.iter().map(|l| l.label.as_str()).collect();
+    let leads: Vec<&str> = report
+        .r#final
+        .leads
+        .iter()
+        .map(|l| l.label.as_str())
+        .collect();
     let expected_leads: Vec<&str> = case["leads"]
         .as_array()
         .expect("leads")

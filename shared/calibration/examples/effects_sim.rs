@@ -2,12 +2,12 @@
 //! effects (the calibrator is not told), calibrates it, and prints what the loop found and
 //! the tip error against the simulator's truth.
 //!
-//! `cargo run --release -p sabr-calibrator --example effects_sim -- SEED SCALE [EFFECT...]`,
+//! `cargo run --release -p sabr-calibration --example effects_sim -- SEED SCALE [EFFECT...]`,
 //! e.g. `... -- 3 0.25 ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.4`. With
 //! `EFFECTS_OUT=DIR` the calibration outputs are written to DIR.
 
-use sabr_calibrator::residual_loop::motion::MotionTrack;
-use sabr_calibrator::{calibrate, CalibrationOptions};
+use sabr_calibration::residual_loop::motion::MotionTrack;
+use sabr_calibration::{calibrate, CalibrationOptions};
 use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
 use sabr_recording::Recording;
@@ -50,10 +50,10 @@ fn main() -> anyhow::Result<()> {
     let calibration = calibrate(&recording, &CalibrationOptions::default())?;
     println!("calibrated in {:.2} s", started.elapsed().as_secs_f64());
     if let Some(dir) = std::env::var_os("EFFECTS_OUT") {
-        sabr_calibrator::write_outputs(&calibration, std::path::Path::new(&dir))?;
+        sabr_calibration::write_outputs(&calibration, std::path::Path::new(&dir))?;
     }
     let report = &calibration.report;
-    print!("{}", sabr_calibrator::residual_loop::summary_text(report));
+    print!("{}", sabr_calibration::residual_loop::summary_text(report));
     for e in &report.effects {
         println!("  {} evidence {:?}", e.label, e.evidence);
     }

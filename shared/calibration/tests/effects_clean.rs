@@ -2,7 +2,7 @@
 //! adds no effect, reports no structure, and finds the residual consistent with the
 //! tracker noise (issue 5).
 //!
-//! Release only: `cargo test --release -p sabr-calibrator --test effects_clean`.
+//! Release only: `cargo test --release -p sabr-calibration --test effects_clean`.
 
 mod effects_support;
 

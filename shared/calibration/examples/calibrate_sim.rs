@@ -1,8 +1,8 @@
 //! Development aid: simulates a session for a seed and calibrates it, printing the errors
-//! against the simulator's truth. `cargo run --release -p sabr-calibrator --example
+//! against the simulator's truth. `cargo run --release -p sabr-calibration --example
 //! calibrate_sim -- SEED [DURATION_SCALE]`.
 
-use sabr_calibrator::{calibrate, CalibrationOptions};
+use sabr_calibration::{calibrate, CalibrationOptions};
 use sabr_sim::{record_session, SimConfig};
 
 fn main() -> anyhow::Result<()> {

@@ -2,12 +2,12 @@
 //! with their parameters, standard deviations and errors before and after, `report.html`
 //! shows the residual plots, `params.toml` holds them (issue 5).
 //!
-//! Release only: `cargo test --release -p sabr-calibrator --test effects_combined`.
+//! Release only: `cargo test --release -p sabr-calibration --test effects_combined`.
 
 mod effects_support;
 
 use effects_support::{assert_discovers, assert_parameter, Named};
-use sabr_calibrator::write_outputs;
+use sabr_calibration::write_outputs;
 use sabr_model::RobotParams;
 
 #[test]
