@@ -57,7 +57,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
         identifiability.condition_number,
         identifiability.fixed.len()
     );
-    print!("{}", sabr_calibration::residual_loop::summary_text(report));
+    print!("{}", sabr_calibration::report::summary_text(report));
     println!(
         "wrote params.toml, report.json, report.html, validation_predictions.csv to {} in {:.2} s",
         args.out.display(),

@@ -144,6 +144,7 @@ pub fn check_plan(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::calibration_segments;
     use sabr_model::RobotParams;
 
     fn limits() -> JointLimits {
@@ -243,5 +244,21 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!((refusal.segment.as_str(), refusal.t_s), ("b", 0.0));
+    }
+
+    #[test]
+    fn calibration_plan_is_within_the_default_limits_and_continuous() {
+        let params = RobotParams::nominal();
+        let stops = params.joints.home_stops;
+        let limits = JointLimits::from_stops(&stops, DEFAULT_RANGE_RAD, DEFAULT_MAX_SPEED_RAD_S);
+        let segments = calibration_segments(&params, 0.05, 3).unwrap();
+        check_plan(&limits, &stops, &segments).unwrap();
+        // A tighter speed limit than the plan's moves refuses it.
+        let slow = JointLimits {
+            max_speed_rad_s: 0.1,
+            ..limits
+        };
+        let refusal = check_plan(&slow, &stops, &segments).unwrap_err();
+        assert!(refusal.reason.contains("speed limit"), "{refusal}");
     }
 }

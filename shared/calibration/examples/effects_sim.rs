@@ -6,7 +6,7 @@
 //! e.g. `... -- 3 0.25 ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.4`. With
 //! `EFFECTS_OUT=DIR` the calibration outputs are written to DIR.
 
-use sabr_calibration::residual_loop::motion::MotionTrack;
+use sabr_calibration::data::motion::MotionTrack;
 use sabr_calibration::{calibrate, CalibrationOptions};
 use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
         sabr_calibration::write_outputs(&calibration, std::path::Path::new(&dir))?;
     }
     let report = &calibration.report;
-    print!("{}", sabr_calibration::residual_loop::summary_text(report));
+    print!("{}", sabr_calibration::report::summary_text(report));
     for e in &report.effects {
         println!("  {} evidence {:?}", e.label, e.evidence);
     }

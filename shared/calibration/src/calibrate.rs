@@ -1,28 +1,41 @@
-//! The calibration pipeline: recording → time sync → stepwise method → joint fit →
-//! validation → report and calibrated parameters.
+//! The calibration pipeline of the biopsy robot, the top of the engine: recording → time
+//! sync → stepwise method → joint fit → residual loop → validation → report and calibrated
+//! parameters. `sabr calibrate` and the live calibrator both call [`calibrate`].
 
+use std::path::Path;
 use std::time::Instant;
 
 use sabr_model::RobotParams;
 use sabr_recording::Recording;
 
-use crate::frames::measured_frames;
-use crate::joint_fit::{joint_fit, JointFit};
-use crate::layout::{CalibModel, ParamId, ParamLayout};
-use crate::noise::NoiseModel;
-use crate::observations::{joint_ranges, Observation, Phase, PhaseTable, SessionData};
+use crate::data::frames::{measured_frames, FrameStats};
+use crate::data::latency;
+use crate::data::phases::{Phase, PhaseTable};
+use crate::data::session::{joint_ranges, Observation, SessionData};
+use crate::data::span::within_session;
+use crate::discovery::discover;
+use crate::error::CalibrationError;
+use crate::fit::joint_fit::{joint_fit, JointFit};
+use crate::fit::validation::{cross_validated, propagated_std};
+use crate::math::stats::{median, ErrorSummary};
+use crate::model::biopsy::noise::{from_static, vicra_default};
+use crate::model::biopsy::params::{paper_layout, ParamId};
+use crate::model::biopsy::predict::predict;
+use crate::model::biopsy::stepwise::{stepwise, FitSets};
+use crate::model::biopsy::validation::{
+    marker_tip_errors, tip_sphere_error, validation_holds, Hold,
+};
+use crate::model::biopsy::{BiopsyModel, TIP};
+use crate::report::discovery::BiopsyJudge;
+use crate::report::output::{write_outputs as write_files, HoldPrediction, OutputError};
+use crate::report::plots::{picture, Plots};
 use crate::report::{
-    model_residuals, parameter_table, DataReport, IdentifiabilityReport, NoiseReport, Report,
-    TimeSyncReport, ValidationReport,
+    model_residuals, parameter_table, DataReport, FinalReport, IdentifiabilityReport, NoiseReport,
+    Report, TimeSyncReport, ValidationReport,
 };
-use crate::stats::median;
-use crate::stepwise::{stepwise, FitSets};
-use crate::timesync::{ClockFit, EncoderTrack};
-use crate::validation::{
-    cross_validated_tip, marker_tip_errors, predicted_tip_std, tip_sphere_error, validation_holds,
-    TipError,
-};
-use crate::{latency, CalibrationError};
+
+/// Label of the paper's model in the residual loop.
+const PAPER_MODEL: &str = "paper model";
 
 /// Knobs of the calibration, with sensible defaults.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,26 +69,15 @@ pub struct Calibration {
     /// The report.
     pub report: Report,
     /// Nominal model with the homing offsets, at the model-free latency.
-    pub nominal: CalibModel,
+    pub nominal: BiopsyModel,
     /// Result of the stepwise method.
-    pub stepwise: CalibModel,
+    pub stepwise: BiopsyModel,
     /// The joint fit (model, noise, fitted observations, Jacobian, identifiability).
-    pub fit: JointFit,
+    pub fit: JointFit<BiopsyModel>,
     /// The synchronised session (frames, clock, encoders, phases).
     pub session: SessionData,
     /// The calibrated model's predictions at the validation holds.
     pub predictions: Vec<HoldPrediction>,
-}
-
-/// The calibrated model's prediction at one validation hold (in `Bb`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct HoldPrediction {
-    /// Mean encoder counts of the hold.
-    pub counts: [f64; 5],
-    /// Predicted tip (mm).
-    pub tip: [f64; 3],
-    /// Predicted needle direction `z_N` (unit).
-    pub direction: [f64; 3],
 }
 
 /// Count rate (counts/s) below which a homing frame counts as at rest.
@@ -104,7 +106,7 @@ pub fn calibrate(
     let started = Instant::now();
     // Only the session's own data (not a later test with the new parameters): see
     // `session_span`.
-    let recording = &crate::session_span::within_session(recording);
+    let recording = &within_session(recording);
     let robot = RobotParams::from_toml_str(&recording.robot_toml).map_err(|source| {
         CalibrationError::RobotToml {
             dir: recording.dir.clone(),
@@ -118,7 +120,12 @@ pub fn calibrate(
         }
     }
     check_motion(&robot, recording, &phases, options)?;
-    let session = synchronise(recording, &robot, phases, options)?;
+    let session = SessionData::synchronise(
+        recording,
+        &robot,
+        phases,
+        (options.max_encoder_gap_ms * 1e6) as i64,
+    )?;
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "synchronised");
     let model_free = latency::estimate(&session)?;
     tracing::debug!(
@@ -162,16 +169,28 @@ pub fn calibrate(
             ),
         });
     }
-    let dwell_noise = NoiseModel::from_static(&dwell).unwrap_or_else(NoiseModel::vicra_default);
+    let dwell_noise = from_static(&dwell).unwrap_or_else(vicra_default);
     let nominal = nominal_model(&robot, &dwell, model_free.latency_s);
     let stepwise_model = stepwise(&nominal, &sets, &dwell_noise)?;
     tracing::debug!(
         elapsed_s = started.elapsed().as_secs_f64(),
         "stepwise method"
     );
-    let layout = ParamLayout::paper();
-    let fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
-    let (fit, discovery) = crate::residual_loop::discover(&session, fit, &dwell_noise, dwell.len());
+    let layout = paper_layout();
+    let paper_fit = joint_fit(&session, &stepwise_model, &dwell_noise, layout.clone())?;
+    let judge = BiopsyJudge {
+        session: &session,
+        rest_noise: &dwell_noise,
+        rest_frames: dwell.len(),
+    };
+    let discovery = discover(&session, paper_fit.clone(), &judge, PAPER_MODEL);
+    let plots = Plots {
+        before: Some(picture(PAPER_MODEL, &paper_fit, &dwell_noise)),
+        after: (!discovery.effects.is_empty())
+            .then(|| picture("final model", &discovery.fit, &dwell_noise)),
+    };
+    let final_report = FinalReport::new(&discovery, plots);
+    let fit = discovery.fit;
 
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "joint fit");
     let validation_frames: Vec<Observation> =
@@ -180,7 +199,7 @@ pub fn calibrate(
     let fitted_at_start: Vec<Observation> = matched
         .items
         .iter()
-        .filter(|o| crate::joint_fit::is_fitted(o))
+        .filter(|o| crate::model::biopsy::is_fitted(o))
         .cloned()
         .collect();
     let final_validation: Vec<Observation> = session
@@ -191,7 +210,7 @@ pub fn calibrate(
         .collect();
     let final_holds = validation_holds(&final_validation);
     let marker_tip =
-        |model: &CalibModel, holds| TipError::of(&marker_tip_errors(model, holds, &fit.noise));
+        |model: &BiopsyModel, holds| ErrorSummary::of(&marker_tip_errors(model, holds, &fit.noise));
     let residual_rms = vec![
         model_residuals(
             "nominal",
@@ -219,9 +238,7 @@ pub fn calibrate(
     let predictions = final_holds
         .iter()
         .filter_map(|hold| {
-            let pose = crate::residuals::predict(&fit.model, &hold.observation)
-                .ok()?
-                .pose;
+            let pose = predict(&fit.model, &hold.observation).ok()?.pose;
             Some(HoldPrediction {
                 counts: hold.observation.counts_at_latency(fit.model.latency_s),
                 tip: pose.tip.coords.into(),
@@ -256,7 +273,7 @@ pub fn calibrate(
         identifiability: IdentifiabilityReport::new(&fit),
         validation,
         effects: discovery.effects,
-        r#final: discovery.final_report,
+        r#final: final_report,
         run_time_s: 0.0,
     };
     let mut params = fit.model.robot.clone();
@@ -299,40 +316,8 @@ fn check_motion(
 fn session_stats(
     recording: &Recording,
     robot: &RobotParams,
-) -> Result<crate::frames::FrameStats, CalibrationError> {
+) -> Result<FrameStats, CalibrationError> {
     Ok(measured_frames(&recording.tracker, &robot.markers.base_to_robot)?.1)
-}
-
-/// Frames, clock fit and encoder track of the recording.
-pub fn synchronise(
-    recording: &Recording,
-    robot: &RobotParams,
-    phases: PhaseTable,
-    options: &CalibrationOptions,
-) -> Result<SessionData, CalibrationError> {
-    let (frames, stats) = measured_frames(&recording.tracker, &robot.markers.base_to_robot)?;
-    if frames.is_empty() {
-        return Err(CalibrationError::NoTrackerFrames(format!(
-            "tracker.csv holds {} frames, none with the base marker and a robot tool: nothing \
-             to calibrate against",
-            stats.frames_total
-        )));
-    }
-    let counters: Vec<u32> = frames.iter().map(|f| f.frame).collect();
-    let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_ns).collect();
-    let clock = ClockFit::fit(&counters, &arrivals)?;
-    let ticks = crate::timesync::unwrap_counters(&counters)?;
-    let encoders = EncoderTrack::new(
-        &recording.encoders,
-        (options.max_encoder_gap_ms * 1e6) as i64,
-    )?;
-    Ok(SessionData {
-        frames,
-        ticks,
-        clock,
-        encoders,
-        phases,
-    })
 }
 
 /// The longest run of consecutive homing frames at rest (same counts).
@@ -365,7 +350,7 @@ fn homing_dwell<'a>(homing: &[&'a Observation]) -> Vec<&'a Observation> {
 }
 
 /// The nominal model with the offsets homing gives: `θ_off = home_stops − GR·θ_enc(dwell)`.
-fn nominal_model(robot: &RobotParams, dwell: &[&Observation], latency_s: f64) -> CalibModel {
+fn nominal_model(robot: &RobotParams, dwell: &[&Observation], latency_s: f64) -> BiopsyModel {
     let motor: Vec<[f64; 5]> = dwell
         .iter()
         .map(|o| robot.motor_angles_fractional(&o.counts))
@@ -377,18 +362,26 @@ fn nominal_model(robot: &RobotParams, dwell: &[&Observation], latency_s: f64) ->
     let mut robot = robot.clone();
     robot.joints.offset = Some(offsets);
     robot.calibration = None;
-    CalibModel { robot, latency_s }
+    BiopsyModel { robot, latency_s }
 }
 
-fn validation_report(fit: &JointFit, holds: &[crate::validation::Hold]) -> ValidationReport {
+fn validation_report(fit: &JointFit<BiopsyModel>, holds: &[Hold]) -> ValidationReport {
     let sphere = tip_sphere_error(&fit.model, holds);
-    let cross = cross_validated_tip(fit);
-    let std = TipError::of(&predicted_tip_std(fit, holds));
+    let cross = cross_validated(fit, TIP);
+    let predicted: Vec<f64> = holds
+        .iter()
+        .filter_map(|h| {
+            propagated_std(fit, |model| {
+                Some(predict(model, &h.observation).ok()?.pose.tip.coords)
+            })
+        })
+        .collect();
+    let std = ErrorSummary::of(&predicted);
     let (source, tip_error) = match sphere {
         Some(error) => ("validation_tip_sphere", Some(error)),
         None => ("cross_validated_tip_phase", cross),
     };
-    let tip_reading_noise_mm = fit.noise.tip.position_covariance.trace().sqrt();
+    let tip_reading_noise_mm = fit.noise.of(TIP).position_covariance.trace().sqrt();
     ValidationReport {
         tip_error_source: source.into(),
         tip_error,
@@ -417,4 +410,15 @@ fn validation_report(fit: &JointFit, holds: &[crate::validation::Hold]) -> Valid
             }
         ),
     }
+}
+
+/// Writes the outputs of `calibration` into `dir` (created if needed): `params.toml`,
+/// `report.json`, `report.html` and `validation_predictions.csv`, each atomically.
+pub fn write_outputs(calibration: &Calibration, dir: &Path) -> Result<(), OutputError> {
+    write_files(
+        &calibration.params.to_toml_string(),
+        &calibration.report,
+        &calibration.predictions,
+        dir,
+    )
 }

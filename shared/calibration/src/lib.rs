@@ -1,49 +1,40 @@
-//! The SABR calibration engine: turns a recording (robot-model.md §7) into a calibrated
-//! robot model, a JSON report and an HTML report. The `sabr calibrate` command and the live
-//! calibrator process share this one code path.
+//! The SABR calibration engine: turns a recording into a calibrated robot model, a JSON
+//! report and an HTML report. `sabr calibrate` and the live calibrator process share this
+//! one code path ([`calibrate`]).
 //!
-//! Pipeline ([`calibrate`]):
-//! 1. **Time sync** ([`timesync`], [`latency`]): a robust line through the tracker frame
-//!    counter and the arrival stamps gives each frame's clock time; the latency (exposure
-//!    before that line) is first found model-free (the delay that best explains the marker
-//!    motion by the encoders), then refined as a parameter of the joint fit; encoder counts
-//!    are interpolated at the exposure times ([`observations`]).
-//! 2. **Stepwise method** ([`stepwise`]): the paper's baseline.
-//! 3. **Joint fit** ([`joint_fit`]): Levenberg–Marquardt on all parameters of a
-//!    [`ParamLayout`] with whitened, Huber-weighted residuals ([`residuals`], [`problem`]),
-//!    then identifiability ([`identifiability`]).
-//! 4. **Validation** ([`validation`]): the validation phase is held out.
-//! 5. **Outputs** ([`output`]): `params.toml`, `report.json`, `report.html`, atomically.
+//! Layers, each using only those below it (read top-down, or bottom-up to see what each
+//! builds on):
 //!
-//! Extending the model (effects): add [`ParamId`] variants (with their [`layout::Channel`])
-//! and pass a larger layout to [`joint_fit::joint_fit`]; residuals, Jacobian,
-//! identifiability and the report work per parameter.
+//! - [`calibrate`] — the biopsy robot's pipeline: recording → time sync → stepwise method →
+//!   joint fit → residual loop → validation → report and calibrated parameters.
+//! - [`report`] — `report.json` (what every layer found), `report.html` with the residual
+//!   plots, atomic output files.
+//! - [`discovery`] — the residual loop: candidates from the model, score tests in sample and
+//!   held out, forward selection, refits, significance against the measurement noise.
+//! - [`fit`] — Levenberg–Marquardt, the joint robust fit of a parameter layout,
+//!   identifiability, held-out checks.
+//! - [`model`] — the robot-model boundary ([`model::RobotModel`]): parameters, measured
+//!   quantities, residual blocks, noise, the stacked problem; and its first implementation,
+//!   the biopsy robot's closed-chain model ([`model::biopsy`]).
+//! - [`data`] — a recording of the biopsy robot → observations: tracker frames in the robot
+//!   base, the exposure clock, the encoder stream, phases, model-free latency.
+//! - [`math`], [`error`] — robust statistics, rigid motions; why a calibration is refused.
+//!
+//! The fit and discovery layers know only the [`model::RobotModel`] trait: another robot
+//! plugs in by implementing it (and a [`model::Dataset`] of its observations).
 
 pub mod calibrate;
+pub mod data;
+pub mod discovery;
 pub mod error;
-pub mod frames;
-pub mod html;
-pub mod identifiability;
-pub mod joint_fit;
-pub mod latency;
-pub mod layout;
-pub mod marker_ik;
-pub mod noise;
-pub mod observations;
-pub mod output;
-pub mod problem;
+pub mod fit;
+pub mod math;
+pub mod model;
 pub mod report;
-pub mod residual_loop;
-pub mod residuals;
-pub mod se3;
-pub mod session_span;
-pub mod stats;
-pub mod stepwise;
-pub mod timesync;
-pub mod validation;
 
-pub use calibrate::{calibrate, Calibration, CalibrationOptions};
+pub use calibrate::{calibrate, write_outputs, Calibration, CalibrationOptions};
 pub use error::CalibrationError;
-pub use layout::{CalibModel, ParamId, ParamLayout};
-pub use output::{write_outputs, OutputError};
+pub use model::biopsy::BiopsyModel;
+pub use model::RobotModel;
+pub use report::output::OutputError;
 pub use report::Report;

@@ -79,6 +79,6 @@ fn five_clean_seeds_meet_the_accuracy_goals() {
             .fit
             .observations
             .iter()
-            .all(|o| o.phase != sabr_calibration::observations::Phase::Validation));
+            .all(|o| o.phase != sabr_calibration::data::phases::Phase::Validation));
     }
 }

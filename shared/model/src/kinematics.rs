@@ -7,7 +7,7 @@ use nalgebra::{
     Isometry3, Matrix3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3,
 };
 
-use crate::{Geometry, Joints};
+use crate::{Geometry, Joints, MarkerPoses, RobotParams};
 
 mod roll;
 mod stage;
@@ -118,6 +118,19 @@ fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, Kinemati
         axes: [x_n, y_n, z_n],
         tip: p_r + geometry.l_n * z_n,
     })
+}
+
+impl RobotParams {
+    /// The marker tool poses (in the base-marker frame `M`) for a needle pose from
+    /// [`forward`]: `T_M_Tf = T_M_Bb · T_Bb_Ef · T_Ef_Tf`, likewise for the back.
+    pub fn marker_poses(&self, pose: &NeedlePose) -> MarkerPoses {
+        let base = &self.markers.base_to_robot;
+        MarkerPoses {
+            front: base * pose.front_effector * self.markers.front_mount,
+            back: base * pose.back_effector * self.markers.back_mount,
+            tip: base * pose.tip,
+        }
+    }
 }
 
 /// Forward kinematics: joint angles → needle and effector poses in `Bb`.

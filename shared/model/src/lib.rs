@@ -8,7 +8,11 @@ pub mod effects;
 pub mod kinematics;
 pub mod params;
 
-pub use effects::{DirectionTracker, Effect, JointMotion, Link, DIRECTION_DEAD_BAND_COUNTS};
+pub use effects::linear::EffectSlot;
+pub use effects::spec::{EffectSpec, EffectSpecError};
+pub use effects::{
+    DirectionTracker, Effect, EffectField, JointMotion, Link, DIRECTION_DEAD_BAND_COUNTS,
+};
 pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
 pub use params::{
     CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,

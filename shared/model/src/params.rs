@@ -11,7 +11,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::effects::{apply_joint_effects, Link};
-use crate::{Counts, Effect, JointMotion, Joints, NeedlePose, JOINT_COUNT};
+use crate::{Counts, Effect, JointMotion, Joints, JOINT_COUNT};
 
 /// The only parameter-file format this crate reads and writes.
 pub const FORMAT_VERSION: u32 = 1;
@@ -339,17 +339,6 @@ impl RobotParams {
         std::array::from_fn(|i| {
             motor[i] * f64::from(self.joints.counts_per_rev[i]) / std::f64::consts::TAU
         })
-    }
-
-    /// The marker tool poses (in the base-marker frame `M`) for a needle pose from
-    /// [`crate::forward`]: `T_M_Tf = T_M_Bb · T_Bb_Ef · T_Ef_Tf`, likewise for the back.
-    pub fn marker_poses(&self, pose: &NeedlePose) -> MarkerPoses {
-        let base = &self.markers.base_to_robot;
-        MarkerPoses {
-            front: base * pose.front_effector * self.markers.front_mount,
-            back: base * pose.back_effector * self.markers.back_mount,
-            tip: base * pose.tip,
-        }
     }
 
     /// The geometry with link-length effects applied (what FK/IK should use).

@@ -1,5 +1,6 @@
-//! Effects injected into the simulated rig and their command-line syntax
-//! `name:key=value,key=value`, e.g. `ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.3`.
+//! Effects injected into the simulated rig, in the effect syntax of `sabr_model`
+//! (`name:key=value,key=value`, e.g. `ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.3`):
+//! the model's effects, plus two of the simulator's own (`latency`, `thermal`).
 //!
 //! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in robot-model.md; the model's
 //! [`Effect`] values inside use its 0-based indices.
@@ -7,7 +8,8 @@
 use std::fmt;
 use std::str::FromStr;
 
-use sabr_model::{Effect, Link};
+use sabr_model::effects::spec::MAX_JOINT_EFFECT_RAD;
+use sabr_model::{Effect, EffectSpec, EffectSpecError};
 
 /// An effect injected into the true robot or the tracker. Each is off unless given.
 #[derive(Debug, Clone, PartialEq)]
@@ -32,25 +34,19 @@ pub enum SimEffect {
     },
 }
 
-/// A rejected effect specification: the spec text and the reason.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("effect `{spec}`: {reason}")]
-pub struct EffectSpecError {
-    /// The specification as given.
-    pub spec: String,
-    /// What is wrong with it.
-    pub reason: String,
-}
-
-/// Largest accepted joint-side amplitude, width or gain (rad): beyond it the robot would
-/// not be a plausible robot.
-const MAX_JOINT_EFFECT_RAD: f64 = 0.05;
-/// Largest accepted link-length change (mm).
-const MAX_LINK_DELTA_MM: f64 = 10.0;
 /// Largest accepted extra latency (ms).
 const MAX_EXTRA_LATENCY_MS: f64 = 1000.0;
 /// Default thermal time constant (s).
 const DEFAULT_THERMAL_TAU_S: f64 = 120.0;
+/// Every effect name the simulator knows.
+const NAMES: [&str; 6] = [
+    "ripple",
+    "backlash",
+    "link",
+    "compliance",
+    "latency",
+    "thermal",
+];
 
 impl SimEffect {
     /// The effect in the model's form, if it is one of the model's library.
@@ -62,195 +58,39 @@ impl SimEffect {
     }
 }
 
-/// The `key=value` pairs of one spec, each consumed at most once.
-struct Params<'a> {
-    spec: &'a str,
-    pairs: Vec<(&'a str, &'a str, bool)>,
-}
-
-impl<'a> Params<'a> {
-    fn parse(spec: &'a str, text: &'a str) -> Result<Self, EffectSpecError> {
-        let mut pairs: Vec<(&str, &str, bool)> = Vec::new();
-        for item in text.split(',') {
-            let item = item.trim();
-            let Some((key, value)) = item.split_once('=') else {
-                return Err(error(
-                    spec,
-                    format!("`{item}` is not of the form key=value"),
-                ));
-            };
-            let (key, value) = (key.trim(), value.trim());
-            if value.contains('=') {
-                return Err(error(
-                    spec,
-                    format!("`{item}` holds more than one `=`: separate pairs with commas"),
-                ));
-            }
-            if pairs.iter().any(|(k, _, _)| *k == key) {
-                return Err(error(spec, format!("key `{key}` is given twice")));
-            }
-            pairs.push((key, value, false));
-        }
-        Ok(Params { spec, pairs })
-    }
-
-    fn take(&mut self, key: &str) -> Option<&'a str> {
-        let pair = self.pairs.iter_mut().find(|(k, _, _)| *k == key)?;
-        pair.2 = true;
-        Some(pair.1)
-    }
-
-    fn number(&mut self, key: &str, default: Option<f64>) -> Result<f64, EffectSpecError> {
-        let Some(text) = self.take(key) else {
-            return default.ok_or_else(|| error(self.spec, format!("missing key `{key}`")));
-        };
-        let value: f64 = text
-            .parse()
-            .map_err(|_| error(self.spec, format!("`{key}={text}` is not a number")))?;
-        if !value.is_finite() {
-            return Err(error(self.spec, format!("`{key}={text}` is not finite")));
-        }
-        Ok(value)
-    }
-
-    fn bounded(&mut self, key: &str, limit: f64, positive: bool) -> Result<f64, EffectSpecError> {
-        let value = self.number(key, None)?;
-        if positive && value <= 0.0 {
-            return Err(error(
-                self.spec,
-                format!("`{key}` must be > 0, got {value}"),
-            ));
-        }
-        if value.abs() > limit {
-            return Err(error(
-                self.spec,
-                format!("`{key}` = {value} is beyond the plausible limit ±{limit}"),
-            ));
-        }
-        Ok(value)
-    }
-
-    fn joint(&mut self) -> Result<usize, EffectSpecError> {
-        let text = self
-            .take("joint")
-            .ok_or_else(|| error(self.spec, "missing key `joint` (1..5)".into()))?;
-        match text.parse::<usize>() {
-            Ok(joint @ 1..=5) => Ok(joint - 1),
-            _ => Err(error(
-                self.spec,
-                format!("`joint={text}` must be 1..5 (θ1..θ5)"),
-            )),
-        }
-    }
-
-    fn finish(self) -> Result<(), EffectSpecError> {
-        match self.pairs.iter().find(|(_, _, used)| !used) {
-            Some((key, _, _)) => Err(error(self.spec, format!("unknown key `{key}`"))),
-            None => Ok(()),
-        }
-    }
-}
-
-fn error(spec: &str, reason: String) -> EffectSpecError {
-    EffectSpecError {
-        spec: spec.to_string(),
-        reason,
-    }
-}
-
-fn parse_link(spec: &str, text: Option<&str>) -> Result<Link, EffectSpecError> {
-    match text {
-        Some("l_f") => Ok(Link::LF),
-        Some("l_fe") => Ok(Link::LFe),
-        Some("l_b") => Ok(Link::LB),
-        Some("l_be") => Ok(Link::LBe),
-        Some("d_offset") => Ok(Link::DOffset),
-        Some(other) => Err(error(
-            spec,
-            format!("`link={other}` must be one of l_f, l_fe, l_b, l_be, d_offset"),
-        )),
-        None => Err(error(spec, "missing key `link`".into())),
-    }
-}
-
-fn link_name(link: Link) -> &'static str {
-    match link {
-        Link::LF => "l_f",
-        Link::LFe => "l_fe",
-        Link::LB => "l_b",
-        Link::LBe => "l_be",
-        Link::DOffset => "d_offset",
-    }
-}
-
 impl FromStr for SimEffect {
     type Err = EffectSpecError;
 
-    fn from_str(spec: &str) -> Result<Self, Self::Err> {
-        let Some((name, rest)) = spec.split_once(':') else {
-            return Err(error(
-                spec,
-                "expected `name:key=value,...` (names: ripple, backlash, link, compliance, \
-                 latency, thermal)"
-                    .into(),
-            ));
-        };
-        let mut params = Params::parse(spec, rest)?;
-        let effect = match name.trim() {
-            "ripple" => {
-                let joint = params.joint()?;
-                let harmonic = params.bounded("harmonic", 100.0, true)?;
-                let amplitude = params.bounded("amplitude", MAX_JOINT_EFFECT_RAD, false)?;
-                let phase = params.number("phase", Some(0.0))?;
-                SimEffect::Model(Effect::TransmissionRipple {
-                    joint,
-                    harmonic,
-                    amplitude,
-                    phase,
-                })
-            }
-            "backlash" => {
-                let joint = params.joint()?;
-                let width = params.bounded("width", MAX_JOINT_EFFECT_RAD, true)?;
-                SimEffect::Model(Effect::Backlash { joint, width })
-            }
-            "link" => {
-                let link = parse_link(spec, params.take("link"))?;
-                let delta = params.bounded("delta", MAX_LINK_DELTA_MM, false)?;
-                SimEffect::Model(Effect::LinkLength { link, delta })
-            }
-            "compliance" => {
-                let joint = params.joint()?;
-                let gain = params.bounded("gain", MAX_JOINT_EFFECT_RAD, false)?;
-                SimEffect::Model(Effect::JointCompliance { joint, gain })
-            }
-            "latency" => SimEffect::TrackerLatency {
-                extra_ms: params.bounded("ms", MAX_EXTRA_LATENCY_MS, true)?,
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let mut spec = EffectSpec::parse(text, &NAMES)?;
+        let effect = match Effect::from_spec(&mut spec) {
+            Some(effect) => SimEffect::Model(effect?),
+            None => match spec.name() {
+                "latency" => SimEffect::TrackerLatency {
+                    extra_ms: spec.bounded("ms", MAX_EXTRA_LATENCY_MS, true)?,
+                },
+                "thermal" => {
+                    let joint = spec.joint()?;
+                    let amplitude = spec.bounded("amplitude", MAX_JOINT_EFFECT_RAD, false)?;
+                    let tau_s = spec.number("tau_s", Some(DEFAULT_THERMAL_TAU_S))?;
+                    if tau_s <= 0.0 {
+                        return Err(spec.error(format!("`tau_s` must be > 0, got {tau_s}")));
+                    }
+                    SimEffect::Thermal {
+                        joint,
+                        amplitude,
+                        tau_s,
+                    }
+                }
+                other => {
+                    return Err(spec.error(format!(
+                        "unknown effect `{other}` (known: {})",
+                        NAMES.join(", ")
+                    )))
+                }
             },
-            "thermal" => {
-                let joint = params.joint()?;
-                let amplitude = params.bounded("amplitude", MAX_JOINT_EFFECT_RAD, false)?;
-                let tau_s = params.number("tau_s", Some(DEFAULT_THERMAL_TAU_S))?;
-                if tau_s <= 0.0 {
-                    return Err(error(spec, format!("`tau_s` must be > 0, got {tau_s}")));
-                }
-                SimEffect::Thermal {
-                    joint,
-                    amplitude,
-                    tau_s,
-                }
-            }
-            other => {
-                return Err(error(
-                    spec,
-                    format!(
-                        "unknown effect `{other}` (known: ripple, backlash, link, compliance, \
-                         latency, thermal)"
-                    ),
-                ))
-            }
         };
-        params.finish()?;
+        spec.finish()?;
         Ok(effect)
     }
 }
@@ -259,25 +99,7 @@ impl FromStr for SimEffect {
 impl fmt::Display for SimEffect {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            SimEffect::Model(Effect::TransmissionRipple {
-                joint,
-                harmonic,
-                amplitude,
-                phase,
-            }) => write!(
-                f,
-                "ripple:joint={},harmonic={harmonic},amplitude={amplitude},phase={phase}",
-                joint + 1
-            ),
-            SimEffect::Model(Effect::Backlash { joint, width }) => {
-                write!(f, "backlash:joint={},width={width}", joint + 1)
-            }
-            SimEffect::Model(Effect::LinkLength { link, delta }) => {
-                write!(f, "link:link={},delta={delta}", link_name(*link))
-            }
-            SimEffect::Model(Effect::JointCompliance { joint, gain }) => {
-                write!(f, "compliance:joint={},gain={gain}", joint + 1)
-            }
+            SimEffect::Model(effect) => effect.fmt(f),
             SimEffect::TrackerLatency { extra_ms } => write!(f, "latency:ms={extra_ms}"),
             SimEffect::Thermal {
                 joint,

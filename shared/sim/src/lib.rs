@@ -21,12 +21,13 @@ mod truth_files;
 
 use std::path::PathBuf;
 
-pub use effect_spec::{EffectSpecError, SimEffect};
+pub use effect_spec::SimEffect;
 pub use encoder::{EncoderClock, EncoderConfig};
 pub use plan::{
     excitation_centre, PhaseSpan, PlanDurations, SessionPlan, ValidationWindow,
     EXCITATION_AMPLITUDE,
 };
+pub use sabr_model::EffectSpecError;
 pub use session::{record_session, FrameTruth, Session, SimConfig, Truth, ValidationTruth};
 pub use tracker::{Exposure, TrackerConfig, TrackerEmulator, TrackerFrame, TrackerTruth};
 pub use truth::{quantise_counts, Perturbation, RobotTruth, ThermalDrift, ToolPoses, TrueRobot};

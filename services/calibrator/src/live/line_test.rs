@@ -15,8 +15,8 @@
 
 use anyhow::{bail, Context};
 use nalgebra::{Point3, Vector3};
-use sabr_calibration::frames::measured_frames;
-use sabr_calibration::marker_ik::joints_from_markers;
+use sabr_calibration::data::frames::measured_frames;
+use sabr_calibration::model::biopsy::marker_ik::joints_from_markers;
 use sabr_calibration::Calibration;
 use sabr_model::{forward, JointMotion, RobotParams};
 use sabr_msgs::{MotionState, MotionStatus, MotorSetpoint, PhaseMark, RigTruth, TrackerFrame};

@@ -9,7 +9,7 @@
 //! recorder writes — encoder samples, tracker frames and phase marks — and keeps them as the
 //! same recording rows ([`sabr_msgs::rows`], under the writer's rules), then hands them to the
 //! same library call as `sabr calibrate`. The library uses only the session's span of the data
-//! (`sabr_calibration::session_span`), so the parameters equal those of `sabr calibrate` on the
+//! (`sabr_calibration::data::span`), so the parameters equal those of `sabr calibrate` on the
 //! recorder's recording, which also holds the graph's idle start and the later line test.
 //!
 //! ## Refusals
@@ -469,7 +469,7 @@ fn summary(calibration: &Calibration, took: Duration) -> String {
         took.as_secs_f64(),
         report.latency_ms,
         report.latency_std_ms,
-        sabr_calibration::residual_loop::summary_text(report)
+        sabr_calibration::report::summary_text(report)
     )
 }
 
@@ -486,6 +486,6 @@ fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> 
 }
 
 fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
-    sabr_calibration::output::write_atomically(path, text.as_bytes())?;
+    sabr_calibration::report::output::write_atomically(path, text.as_bytes())?;
     Ok(())
 }

@@ -1,8 +1,8 @@
 //! The session as it arrives: the raw streams kept as recording rows, under the same rules
 //! the recorder's writer applies, and what is still missing before a calibration.
 
-use sabr_calibration::observations::PhaseTable;
-use sabr_calibration::session_span::SessionSpan;
+use sabr_calibration::data::phases::PhaseTable;
+use sabr_calibration::data::span::SessionSpan;
 use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
 use sabr_recording::{
     CsvFormat, EncoderRow, EncodersCsv, PhaseRow, PhasesCsv, Recording, TrackerCsv, TrackerRow,
@@ -216,7 +216,7 @@ mod tests {
         );
         session.phase(&mark("tip", 5, 6));
         session.phase(&mark("validation", 6, 8));
-        let end_ns = 8_000_000_000 + sabr_calibration::session_span::TAIL_NS;
+        let end_ns = 8_000_000_000 + sabr_calibration::data::span::TAIL_NS;
         assert_eq!(session.progress(), Progress::Tail { end_ns });
         session.encoder(&sample(2, end_ns + 1));
         let frame = TrackerFrame {

@@ -5,10 +5,11 @@
 // Each test crate uses a subset of these helpers.
 #![allow(dead_code)]
 
-use sabr_calibration::joint_fit::joint_fit;
-use sabr_calibration::residual_loop::motion::MotionTrack;
-use sabr_calibration::residual_loop::EffectReport;
-use sabr_calibration::{calibrate, Calibration, CalibrationOptions, ParamLayout};
+use sabr_calibration::data::motion::MotionTrack;
+use sabr_calibration::fit::joint_fit::joint_fit;
+use sabr_calibration::model::biopsy::params::paper_layout;
+use sabr_calibration::report::EffectEntry;
+use sabr_calibration::{calibrate, Calibration, CalibrationOptions};
 use sabr_model::DIRECTION_DEAD_BAND_COUNTS;
 use sabr_model::{forward, RobotParams};
 use sabr_recording::Recording;
@@ -78,7 +79,7 @@ pub fn paper_model(run: &Run) -> RobotParams {
         &calibration.session,
         &calibration.stepwise,
         &calibration.fit.noise,
-        ParamLayout::paper(),
+        paper_layout(),
     )
     .expect("paper fit");
     fit.model.robot
@@ -114,7 +115,7 @@ impl Named {
         }
     }
 
-    fn of(report: &EffectReport) -> Self {
+    fn of(report: &EffectEntry) -> Self {
         Self {
             class: report.name.clone(),
             joint: report.joint,

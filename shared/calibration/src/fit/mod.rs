@@ -1,0 +1,9 @@
+//! Fit layer, for any [`RobotModel`](crate::model::RobotModel): the Levenberg–Marquardt
+//! solve ([`solve`]), the joint robust fit of a parameter layout ([`joint_fit`]), the
+//! identifiability of its parameters ([`identifiability`]) and held-out checks
+//! ([`validation`]).
+
+pub mod identifiability;
+pub mod joint_fit;
+pub mod solve;
+pub mod validation;
