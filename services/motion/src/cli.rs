@@ -5,8 +5,8 @@ use crate::homing::HomingConfig;
 use crate::limits::{check_plan, JointLimits, DEFAULT_MAX_SPEED_RAD_S, DEFAULT_RANGE_RAD};
 use crate::plan::calibration_segments;
 use anyhow::{bail, Context};
+use sabr_model::plan::PlanDurations;
 use sabr_model::{Joints, RobotParams};
-use sabr_sim::PlanDurations;
 use std::path::PathBuf;
 
 /// A session the executor can run.

@@ -64,7 +64,7 @@ struct Rig {
 impl Rig {
     fn new(seed: u64) -> Self {
         let nominal = RobotParams::nominal();
-        let centre = sabr_sim::excitation_centre(&nominal.joints.home_stops, &HOME_JOINTS);
+        let centre = sabr_model::plan::excitation_centre(&nominal.joints.home_stops, &HOME_JOINTS);
         let truth = RobotTruth::sample(
             &nominal,
             &Perturbation::default(),

@@ -201,8 +201,10 @@ mod tests {
 
     fn true_robot(seed: u64) -> TrueRobot {
         let nominal = RobotParams::nominal();
-        let centre =
-            sabr_sim::excitation_centre(&nominal.joints.home_stops, &sabr_model::HOME_JOINTS);
+        let centre = sabr_model::plan::excitation_centre(
+            &nominal.joints.home_stops,
+            &sabr_model::HOME_JOINTS,
+        );
         let truth = RobotTruth::sample(
             &nominal,
             &Perturbation::default(),

@@ -26,7 +26,7 @@ pub struct JointLimits {
 }
 
 /// Which way each joint's mechanical stop bounds it: +1 from above, −1 from below (the stop
-/// lies on that side of the home pose, as in `sabr_sim::excitation_centre`).
+/// lies on that side of the home pose, as in `sabr_model::plan::excitation_centre`).
 pub fn stop_sides(home_stops: &Joints) -> [f64; JOINT_COUNT] {
     std::array::from_fn(|i| (home_stops[i] - HOME_JOINTS[i]).signum())
 }

@@ -52,7 +52,7 @@ impl LineSpec {
         speed_mm_s: f64,
         dwell_s: f64,
     ) -> Result<Self, String> {
-        let centre = sabr_sim::excitation_centre(home_stops, &HOME_JOINTS);
+        let centre = sabr_model::plan::excitation_centre(home_stops, &HOME_JOINTS);
         let pose = forward(geometry, &centre)
             .map_err(|e| format!("the excitation centre has no forward kinematics: {e}"))?;
         let spec = Self {

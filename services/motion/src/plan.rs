@@ -1,10 +1,10 @@
 //! Plans as sampled joint trajectories, and the calibration session plan taken from the
-//! simulator's session plan (`sabr_sim::SessionPlan`: excitation, tip phase, validation).
+//! simulator's session plan (`sabr_model::plan::SessionPlan`: excitation, tip phase, validation).
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use sabr_model::plan::{excitation_centre, PlanDurations, SessionPlan};
 use sabr_model::{Joints, RobotParams, HOME_JOINTS};
-use sabr_sim::{excitation_centre, PlanDurations, SessionPlan};
 
 /// Setpoint period (ns): setpoints go out at 1 kHz.
 pub const PERIOD_NS: i64 = 1_000_000;

@@ -3,9 +3,9 @@
 //! Times are robot time (ns since power-up); the plan starts when [`Autoplay::start`] is
 //! called and the robot holds its power-up pose until then.
 
+use sabr_model::plan::{PhaseSpan, SessionPlan};
 use sabr_model::Joints;
 use sabr_node::{GraphObserver, NodeError};
-use sabr_sim::{PhaseSpan, SessionPlan};
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 

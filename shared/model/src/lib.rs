@@ -1,5 +1,6 @@
 //! The SABR robot model: joint/encoder map, forward and inverse kinematics of the two
-//! 5-bar stages and the needle, marker poses, calibration parameters and effect models.
+//! 5-bar stages and the needle, marker poses, calibration parameters, effect models and the
+//! calibration session plan (which the simulator and the motion executor both run).
 //!
 //! Everything follows `robot-model.md` (the project contract). Units: millimetres and
 //! radians. No I/O: parameter files are parsed from and written to strings.
@@ -7,6 +8,7 @@
 pub mod effects;
 pub mod kinematics;
 pub mod params;
+pub mod plan;
 
 pub use effects::linear::EffectSlot;
 pub use effects::spec::{EffectSpec, EffectSpecError};

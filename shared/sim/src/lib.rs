@@ -6,14 +6,14 @@
 //!   poses (robot time in ns since power-up).
 //! - [`EncoderClock`]: when the host samples the counters (1 kHz with jitter).
 //! - [`TrackerEmulator`]: Polaris-like frames of the true tool poses (noise, latency, drops).
-//! - [`SessionPlan`]: homing, excitation, tip phase and validation poses.
+//! - `sabr_model::plan::SessionPlan`: homing, excitation, tip phase and validation poses
+//!   (the plan `sabr-motion` runs on the real robot too).
 //!
 //! [`record_session`] runs them offline into a [`sabr_recording::Recording`] and a [`Truth`];
 //! [`write_session`] writes both to disk (`DIR/` and `DIR/truth/`).
 
 mod effect_spec;
 mod encoder;
-mod plan;
 mod session;
 mod tracker;
 mod truth;
@@ -23,10 +23,6 @@ use std::path::PathBuf;
 
 pub use effect_spec::SimEffect;
 pub use encoder::{EncoderClock, EncoderConfig};
-pub use plan::{
-    excitation_centre, PhaseSpan, PlanDurations, SessionPlan, ValidationWindow,
-    EXCITATION_AMPLITUDE,
-};
 pub use sabr_model::EffectSpecError;
 pub use session::{record_session, FrameTruth, Session, SimConfig, Truth, ValidationTruth};
 pub use tracker::{Exposure, TrackerConfig, TrackerEmulator, TrackerFrame, TrackerTruth};

@@ -7,12 +7,12 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sabr_model::kinematics::HOME_JOINTS;
+use sabr_model::plan::{excitation_centre, PlanDurations, SessionPlan};
 use sabr_model::{Counts, Joints, RobotParams};
 use sabr_recording::{EncoderRow, PhaseRow, Recording, TrackerRow};
 
 use crate::effect_spec::SimEffect;
 use crate::encoder::{EncoderClock, EncoderConfig};
-use crate::plan::{excitation_centre, PlanDurations, SessionPlan};
 use crate::tracker::{TrackerConfig, TrackerEmulator, TrackerTruth};
 use crate::truth::{Perturbation, RobotTruth, TrueRobot};
 use crate::SimError;
@@ -183,8 +183,9 @@ impl Session {
             &robot.power_up_joints,
             &durations,
             &mut stream(config.seed, Stream::Plan),
-        )?;
-        plan.check_reachable(&robot)?;
+        )
+        .map_err(|e| SimError::Config(e.to_string()))?;
+        robot.check_reachable(&plan)?;
 
         let centre_pose = sabr_model::forward(&nominal.geometry, &centre)
             .map_err(|e| SimError::Config(format!("excitation centre has no FK: {e}")))?;

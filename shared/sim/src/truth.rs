@@ -8,10 +8,12 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sabr_model::effects::{apply_joint_effects, JointMotion};
-use sabr_model::{forward, Counts, Geometry, Joints, KinematicsError, NeedlePose, RobotParams};
+use sabr_model::plan::{SessionPlan, EXCITATION_AMPLITUDE};
+use sabr_model::{
+    forward, inverse, Counts, Geometry, Joints, KinematicsError, NeedlePose, RobotParams,
+};
 
 use crate::effect_spec::SimEffect;
-use crate::plan::EXCITATION_AMPLITUDE;
 use crate::SimError;
 
 /// Attempts at drawing a robot whose nominal tip error is in the wanted range.
@@ -207,7 +209,44 @@ fn nominal_tip_rms(nominal: &RobotParams, robot: &Draw, centre: &Joints) -> Opti
     Some((sum / REFERENCE_POSES as f64).sqrt())
 }
 
+/// Sampling period of the reachability check (ns).
+const CHECK_PERIOD_NS: i64 = 50_000_000;
+/// Joint tolerance of the IK round trip in the reachability check (rad).
+const IK_TOLERANCE: f64 = 1e-6;
+
 impl RobotTruth {
+    /// Checks that the true robot following `plan` stays in its reachable workspace: at
+    /// every 50 ms, FK of the true joints exists and IK recovers them.
+    pub fn check_reachable(&self, plan: &SessionPlan) -> Result<(), SimError> {
+        let mut robot = TrueRobot::new(self.clone());
+        let geometry = self.params.effective_geometry();
+        let mut t_ns = 0;
+        while t_ns <= plan.end_ns() {
+            robot.command(t_ns, &self.motor_for_joints(&plan.joints_at(t_ns)));
+            let q = robot.joints();
+            let unreachable = |reason: String| SimError::Unreachable {
+                t_s: t_ns as f64 * 1e-9,
+                joints: q,
+                reason,
+            };
+            let pose = robot.pose().map_err(|e| unreachable(e.to_string()))?;
+            let back = inverse(&geometry, &pose.tip, &pose.direction, &q)
+                .map_err(|e| unreachable(format!("IK of the FK pose fails: {e}")))?;
+            let error = q
+                .iter()
+                .zip(&back)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            if error > IK_TOLERANCE {
+                return Err(unreachable(format!(
+                    "IK recovers the joints only to {error:.2e} rad (near a singularity)"
+                )));
+            }
+            t_ns += CHECK_PERIOD_NS;
+        }
+        Ok(())
+    }
+
     /// Samples a true robot around `nominal`: perturbed gear ratios, stops, front base,
     /// needle length and mountings; a power-up pose near `centre` (rad); `effects` injected.
     /// `T_M_Bb` stays nominal (it is known from the base fixture). With

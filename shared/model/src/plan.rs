@@ -6,10 +6,8 @@
 use std::f64::consts::PI;
 
 use rand::Rng;
-use sabr_model::{forward, inverse, Geometry, Joints};
 
-use crate::truth::{RobotTruth, TrueRobot};
-use crate::SimError;
+use crate::{forward, Geometry, Joints};
 
 /// Peak amplitude of the excitation per joint (rad).
 pub const EXCITATION_AMPLITUDE: f64 = 0.2;
@@ -29,10 +27,14 @@ const SINE_FREQUENCIES_HZ: [f64; 3] = [0.05, 0.11, 0.23];
 const SINE_SHARES: [f64; 3] = [0.5, 0.3, 0.2];
 /// Candidates drawn per validation pose (the farthest from those chosen wins).
 const VALIDATION_CANDIDATES: usize = 24;
-/// Sampling period of the reachability check (ns).
-const CHECK_PERIOD_NS: i64 = 50_000_000;
-/// Joint tolerance of the IK round trip in the reachability check (rad).
-const IK_TOLERANCE: f64 = 1e-6;
+
+/// Why a plan could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// No validation pose around the excitation centre is reachable.
+    #[error("no reachable validation pose found around the centre")]
+    NoValidationPose,
+}
 
 /// Phase durations at duration scale 1 (about 5 minutes in all).
 #[derive(Debug, Clone, PartialEq)]
@@ -239,7 +241,7 @@ fn validation_poses(
     centre: &Joints,
     count: usize,
     rng: &mut impl Rng,
-) -> Result<Vec<Joints>, SimError> {
+) -> Result<Vec<Joints>, PlanError> {
     let reach = 0.85 * EXCITATION_AMPLITUDE;
     let mut chosen: Vec<(Joints, nalgebra::Point3<f64>)> = Vec::with_capacity(count);
     for _ in 0..count {
@@ -257,9 +259,7 @@ fn validation_poses(
                 best = Some((spread, q, pose.tip));
             }
         }
-        let (_, q, tip) = best.ok_or_else(|| {
-            SimError::Config("no reachable validation pose found around the centre".into())
-        })?;
+        let (_, q, tip) = best.ok_or(PlanError::NoValidationPose)?;
         chosen.push((q, tip));
     }
     Ok(chosen.into_iter().map(|(q, _)| q).collect())
@@ -276,7 +276,7 @@ impl SessionPlan {
         power_up: &Joints,
         durations: &PlanDurations,
         rng: &mut impl Rng,
-    ) -> Result<Self, SimError> {
+    ) -> Result<Self, PlanError> {
         let mut b = Builder {
             segments: Vec::new(),
             phases: Vec::new(),
@@ -377,37 +377,5 @@ impl SessionPlan {
                 })
             }
         }
-    }
-
-    /// Checks that the true robot following the plan stays in its reachable workspace: at
-    /// every 50 ms, FK of the true joints exists and IK recovers them.
-    pub fn check_reachable(&self, truth: &RobotTruth) -> Result<(), SimError> {
-        let mut robot = TrueRobot::new(truth.clone());
-        let geometry = truth.params.effective_geometry();
-        let mut t_ns = 0;
-        while t_ns <= self.end_ns() {
-            robot.command(t_ns, &truth.motor_for_joints(&self.joints_at(t_ns)));
-            let q = robot.joints();
-            let unreachable = |reason: String| SimError::Unreachable {
-                t_s: t_ns as f64 * 1e-9,
-                joints: q,
-                reason,
-            };
-            let pose = robot.pose().map_err(|e| unreachable(e.to_string()))?;
-            let back = inverse(&geometry, &pose.tip, &pose.direction, &q)
-                .map_err(|e| unreachable(format!("IK of the FK pose fails: {e}")))?;
-            let error = q
-                .iter()
-                .zip(&back)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max);
-            if error > IK_TOLERANCE {
-                return Err(unreachable(format!(
-                    "IK recovers the joints only to {error:.2e} rad (near a singularity)"
-                )));
-            }
-            t_ns += CHECK_PERIOD_NS;
-        }
-        Ok(())
     }
 }
