@@ -92,7 +92,9 @@ fn imports_the_three_series_into_two_setups() {
     // gives x, y, z, w = -0.18083566, -0.68490138, -0.18653568, 0.68074444); no std columns.
     let first = &recording.rows[0];
     assert_eq!((first.index, first.line), (0, 2));
-    assert_eq!(first.joints, [-1.5708, -1.5708, 0.0, -1.5708, 0.0, 0.0]);
+    // The file's own rounded quarter turns, as written.
+    let quarter: f64 = "-1.5708".parse().unwrap();
+    assert_eq!(first.joints, [quarter, quarter, 0.0, quarter, 0.0, 0.0]);
     assert_eq!(first.temperature_c, Some(23.6800003051758));
     let tmac = first.targets[0].unwrap();
     assert_eq!(tmac.position_mm, [2361.9831, -1368.5474, 119.39713]);
