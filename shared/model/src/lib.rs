@@ -4,11 +4,17 @@
 //!
 //! Everything follows `robot-model.md` (the project contract). Units: millimetres and
 //! radians. No I/O: parameter files are parsed from and written to strings.
+//!
+//! Serial and branched arms described by URDF are [`tree::KinematicTree`]s
+//! ([`KinematicTree::from_urdf_str`]): forward kinematics of every link, geometric error
+//! parameters with their Jacobian, gravity torques.
 
 pub mod effects;
 pub mod kinematics;
 pub mod params;
 pub mod plan;
+pub mod tree;
+pub mod urdf;
 
 pub use effects::linear::EffectSlot;
 pub use effects::spec::{EffectSpec, EffectSpecError};
@@ -20,6 +26,7 @@ pub use params::{
     CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,
     RobotParams,
 };
+pub use tree::{KinematicTree, LinkId, TargetJacobian, TreeError, TreeState};
 
 /// A joint vector θ1..θ5 in radians (robot-model.md §2).
 pub type Joints = [f64; 5];

@@ -120,6 +120,22 @@ pub enum Problem {
     /// A phase has an empty name.
     #[error("field `phase`: empty phase name")]
     EmptyPhaseName,
+    /// A column of a header is missing, repeated, unknown or out of place.
+    #[error("column `{column}`: {reason}")]
+    BadColumn {
+        /// The column's name.
+        column: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A field of a row whose columns are named by the header (poses v1) is malformed.
+    #[error("field `{column}`: {reason}")]
+    BadField {
+        /// The column's name.
+        column: String,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// The final line of a file cut off mid-write, which a lenient read dropped.
@@ -154,6 +170,14 @@ pub enum RecordingError {
     MissingFile {
         /// The file.
         path: PathBuf,
+    },
+    /// A recording's `robot.toml` is malformed (poses v1).
+    #[error("{}: {reason}", path.display())]
+    Robot {
+        /// The file.
+        path: PathBuf,
+        /// Which key is wrong and why.
+        reason: String,
     },
     /// The operating system refused an operation on a file.
     #[error("{}: cannot {action}: {source}", path.display())]

@@ -7,6 +7,9 @@
 //! - [`RecordingWriter`] writes a recording row by row (optionally flushing continuously);
 //!   [`write_all`] writes a [`Recording`] in one call.
 //!
+//! The static measurement sets of arms described by URDF are a second recording kind,
+//! "poses v1" ([`poses`]).
+//!
 //! Every error names the file, the 1-based line and the reason ([`RecordingError`]). Floats are
 //! written in Rust's shortest round-trip form, so write → read gives back the same bits.
 
@@ -14,6 +17,7 @@ mod encoders;
 mod error;
 mod format;
 mod phases;
+pub mod poses;
 mod reader;
 mod recording;
 mod rows;
