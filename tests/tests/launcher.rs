@@ -267,3 +267,48 @@ fn a_malformed_launch_file_is_rejected_with_file_line_and_reason() {
         "a run directory was created: {output}"
     );
 }
+
+/// `Cpus_allowed_list` and the scheduling policy and real-time priority (`/proc/<pid>/stat`
+/// fields 41 and 40) of a process.
+fn placement_of(pid: u32) -> (String, u32, u32) {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    let cpus = status
+        .lines()
+        .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
+        .unwrap()
+        .trim()
+        .to_owned();
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // Fields after the command name, which ends with the last ')': field 3 is first.
+    let fields: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
+    let field = |n: usize| fields[n - 3].parse::<u32>().unwrap();
+    (cpus, field(41), field(40))
+}
+
+#[test]
+fn nodes_run_with_their_cpu_set_and_scheduling_policy() {
+    let toml = r#"
+[[node]]
+name = "pinned"
+exec = "sabr-test-node"
+cpus = [0]
+sched = "rr:3"
+
+[[node]]
+name = "free"
+exec = "sabr-test-node"
+"#;
+    let mut graph = LaunchedGraph::start("placement", toml, &[], true);
+    let pinned = graph
+        .wait_ready("pinned", None, LONG)
+        .expect("pinned ready");
+    let free = graph.wait_ready("free", None, LONG).expect("free ready");
+    // SCHED_RR is policy 2, SCHED_OTHER 0.
+    assert_eq!(placement_of(pinned.pid), ("0".to_owned(), 2, 3));
+    let (cpus, policy, priority) = placement_of(free.pid);
+    assert_eq!((policy, priority), (0, 0));
+    assert_eq!(cpus, placement_of(std::process::id()).0);
+    let status = graph.interrupt(LONG).expect("launcher exits");
+    assert!(status.success(), "{}", graph.output());
+    assert_all_gone(&mut graph);
+}

@@ -6,6 +6,7 @@
 //! done, or a required node ending; then removes the domain's iceoryx2 leftovers. Each node's
 //! stdout and stderr go to `runs/<id>/logs/<node>.log`. See [`spec`] for the file format.
 
+pub mod placement;
 mod run_dir;
 pub mod spec;
 mod supervisor;
@@ -61,10 +62,16 @@ pub fn bin_dir_or_beside_sabr(dir: Option<&Path>) -> anyhow::Result<PathBuf> {
 pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     let bin_dir = bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
     let graph = spec::load(&args.file, &bin_dir)?;
+    spec::check_placements(&graph)?;
     if args.check {
         println!("{}: valid; start order:", args.file.display());
         for node in &graph.nodes {
-            println!("  {} ({})", node.name, node.exec.display());
+            let placement = if node.placement.is_default() {
+                String::new()
+            } else {
+                format!(", {}", node.placement)
+            };
+            println!("  {} ({}{placement})", node.name, node.exec.display());
         }
         return Ok(ExitCode::SUCCESS);
     }

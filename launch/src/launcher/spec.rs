@@ -20,8 +20,15 @@
 //! heartbeat_timeout_s = 2.0    # optional: silent this long while ready → killed (and restarted)
 //! console = true               # default false: its stdout lines are also shown on the
 //!                              # launcher's terminal (prefixed with the node's name)
+//! cpus = [0]                   # optional: the CPUs it may run on (sched_setaffinity)
+//! sched = "fifo:40"            # optional: "fifo:N" | "rr:N" (N = 1..=99) | "other"
 //! ```
+//!
+//! A placement (`cpus`, `sched`) is checked against the machine when the file is read and
+//! tried before any node starts ([`check_placements`]); the launcher applies it in the child
+//! before the node's executable runs.
 
+use super::placement::{self, Placement, Sched};
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
@@ -86,6 +93,10 @@ pub struct NodeSpec {
     pub heartbeat_timeout: Option<Duration>,
     /// If true, the node's stdout lines also go to the launcher's terminal (progress, results).
     pub console: bool,
+    /// CPU set and scheduling policy.
+    pub placement: Placement,
+    /// Line of the launch file where the placement (or, without one, the node) is given.
+    pub placement_line: usize,
 }
 
 /// A validated graph: nodes in start order (every node after its dependencies).
@@ -139,6 +150,8 @@ struct NodeToml {
     heartbeat_timeout_s: Option<Spanned<f64>>,
     #[serde(default)]
     console: bool,
+    cpus: Option<Spanned<Vec<usize>>>,
+    sched: Option<Spanned<String>>,
 }
 
 fn default_max_restarts() -> u32 {
@@ -202,6 +215,7 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             )?),
             None => None,
         };
+        let (placement, placement_line) = node_placement(node, text, &at)?;
         nodes.push(NodeSpec {
             name: name.clone(),
             exec,
@@ -219,6 +233,8 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             ready_timeout: seconds(&node.ready_timeout_s, 10.0, "ready_timeout_s", &at)?,
             heartbeat_timeout,
             console: node.console,
+            placement,
+            placement_line,
         });
     }
     for entry in &parsed.node {
@@ -257,6 +273,47 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
         stop_grace,
         term_grace,
     })
+}
+
+/// The node's placement and the line it is given on.
+fn node_placement(
+    node: &NodeToml,
+    text: &str,
+    at: &impl Fn(Range<usize>, String) -> LaunchFileError,
+) -> Result<(Placement, usize), LaunchFileError> {
+    let mut line = line_column(text, node.name.span().start).0;
+    let cpus = match &node.cpus {
+        None => None,
+        Some(cpus) => {
+            placement::check_cpus(cpus.get_ref()).map_err(|reason| at(cpus.span(), reason))?;
+            line = line_column(text, cpus.span().start).0;
+            Some(cpus.get_ref().clone())
+        }
+    };
+    let sched = match &node.sched {
+        None => None,
+        Some(sched) => {
+            let parsed =
+                Sched::parse(sched.get_ref()).map_err(|reason| at(sched.span(), reason))?;
+            line = line_column(text, sched.span().start).0;
+            Some(parsed)
+        }
+    };
+    Ok((Placement { cpus, sched }, line))
+}
+
+/// Tries every node's placement on this machine before anything starts; the error names the
+/// node, the launch-file line, what failed and how to allow it.
+pub fn check_placements(graph: &GraphSpec) -> Result<(), LaunchFileError> {
+    for node in graph.nodes.iter().filter(|n| !n.placement.is_default()) {
+        node.placement.probe().map_err(|reason| LaunchFileError {
+            file: graph.file.clone(),
+            line: node.placement_line,
+            column: 1,
+            reason: format!("node {:?}: {reason}", node.name),
+        })?;
+    }
+    Ok(())
 }
 
 /// Start order by Kahn's algorithm, ties in file order; on a cycle, the names along it.
@@ -465,6 +522,41 @@ exec = "a"
 
         let e = error("[[node]]\nname = \"x\"\n");
         assert!(e.reason.contains("exec"), "{e}");
+    }
+
+    #[test]
+    fn placement_is_parsed_and_checked() {
+        let spec = check(
+            "[[node]]\nname = \"x\"\nexec = \"a\"\ncpus = [0]\nsched = \"rr:5\"\n\
+             [[node]]\nname = \"y\"\nexec = \"b\"\n",
+        )
+        .unwrap();
+        assert_eq!(spec.nodes[0].placement.cpus, Some(vec![0]));
+        assert_eq!(spec.nodes[0].placement.sched, Some(Sched::RoundRobin(5)));
+        assert_eq!(spec.nodes[0].placement_line, 5);
+        assert!(spec.nodes[1].placement.is_default());
+        assert_eq!(spec.nodes[1].placement_line, 7);
+
+        let e = error("[[node]]\nname = \"x\"\nexec = \"a\"\ncpus = [0, 4096]\n");
+        assert_eq!(e.line, 4);
+        assert!(e.reason.contains("CPU 4096 does not exist"), "{e}");
+        let e = error("[[node]]\nname = \"x\"\nexec = \"a\"\nsched = \"fifo:200\"\n");
+        assert_eq!((e.line, e.column), (4, 9));
+        assert!(e.reason.contains("fifo:200"), "{e}");
+        let e = error("[[node]]\nname = \"x\"\nexec = \"a\"\ncpus = [-1]\n");
+        assert_eq!(e.line, 4);
+    }
+
+    #[test]
+    fn a_placement_the_system_refuses_names_the_node_and_line() {
+        // Root may take any real-time policy here, so the refusal is a CPU set the kernel
+        // rejects (a CPU that is not online: EINVAL), past the parse-time check.
+        let mut spec = check("[[node]]\nname = \"x\"\nexec = \"a\"\ncpus = [0]\n").unwrap();
+        spec.nodes[0].placement.cpus = Some(vec![placement::online_cpus() + 7]);
+        let e = check_placements(&spec).unwrap_err();
+        assert_eq!(e.line, 4);
+        assert!(e.reason.starts_with("node \"x\": "), "{e}");
+        assert!(e.reason.contains("cannot apply the placement"), "{e}");
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! Starting, watching, restarting and stopping the node processes of a graph.
 
+use super::placement::Prepared;
 use super::run_dir::RunDir;
 use super::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
 use nix::sys::signal::{kill, Signal};
@@ -423,7 +424,11 @@ impl<'a> Supervisor<'a> {
             // Own process group: a terminal's Ctrl-C reaches only the launcher, which then
             // stops the nodes in reverse order.
             .process_group(0);
-        die_with_launcher(&mut command);
+        let placement = spec
+            .placement
+            .prepare()
+            .map_err(|reason| anyhow::anyhow!("placement of {}: {reason}", spec.name))?;
+        prepare_child(&mut command, placement);
         let mut child = command.spawn()?;
         let echo = child
             .stdout
@@ -462,18 +467,21 @@ fn drain_echo(echo: Option<JoinHandle<()>>) {
     }
 }
 
-/// Makes the kernel send SIGTERM to the child when the launcher dies, so no node outlives it.
+/// In the child before exec: makes the kernel send SIGTERM to the child when the launcher
+/// dies (so no node outlives it), then applies the node's CPU set and scheduling policy.
 #[allow(unsafe_code)]
-fn die_with_launcher(command: &mut Command) {
+fn prepare_child(command: &mut Command, placement: Prepared) {
     let launcher = nix::unistd::getpid();
     // SAFETY: the closure runs in the child between fork and exec; it only makes the
-    // async-signal-safe system calls prctl and getppid and does not allocate.
+    // async-signal-safe system calls prctl, getppid, sched_setaffinity and
+    // sched_setscheduler and does not allocate.
     unsafe {
         command.pre_exec(move || {
             nix::sys::prctl::set_pdeathsig(Signal::SIGTERM)?;
             if nix::unistd::getppid() != launcher {
                 return Err(nix::errno::Errno::ESRCH.into());
             }
+            placement.apply()?;
             Ok(())
         });
     }

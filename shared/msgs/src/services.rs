@@ -31,6 +31,11 @@ pub const RIG_PHASES: &str = "sabr/rig/phases";
 /// heartbeats, stopping, done.
 pub const GRAPH_LIFECYCLE: &str = "sabr/graph/lifecycle";
 
+/// Prefix of the event service that is one process's doorbell in a graph on the doorbell
+/// transport (`sabr_node::Doorbell`): `<prefix>/<iceoryx2 node id in hex>`. Every producer
+/// rings the doorbells of its consumers' nodes; each process waits on its own.
+pub const GRAPH_DOORBELLS: &str = "sabr/graph/doorbell";
+
 /// Publish-subscribe [`crate::EncoderSample`] used as a plain counter by the launcher's test
 /// node (`sabr-test-node`); no production node uses it.
 pub const TEST_COUNTER: &str = "sabr/test/counter";

@@ -35,13 +35,16 @@
 
 mod deadline;
 mod domain;
+pub mod doorbell;
 mod observer;
 mod ports;
 mod runtime;
 mod time;
+mod transport;
 
 pub use deadline::Deadline;
 pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
+pub use doorbell::Doorbell;
 pub use observer::{domain_files, release_domain, GraphObserver};
 pub use ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
 pub use runtime::{
@@ -49,6 +52,7 @@ pub use runtime::{
     RUN_DIR_ENV,
 };
 pub use time::monotonic_ns;
+pub use transport::Transport;
 
 /// The iceoryx2 crate this runtime is built on, for direct use of what the helpers lack.
 pub use iceoryx2;

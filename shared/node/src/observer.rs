@@ -1,7 +1,7 @@
 //! Watching the nodes of a domain from outside the graph (the launcher, tests).
 
 use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
-use crate::{Domain, NodeError};
+use crate::{Domain, NodeError, Transport};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::{ipc, NodeBuilder};
 use sabr_msgs::{services, Lifecycle};
@@ -9,19 +9,26 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// An iceoryx2 node that receives every node's lifecycle announcements of a domain and can
-/// clean up after dead nodes. It does not announce itself.
-pub struct GraphObserver {
-    node: Node<ipc::Service>,
-    lifecycle: iceoryx2::port::subscriber::Subscriber<ipc::Service, Lifecycle, ()>,
+/// clean up after dead nodes. It does not announce itself. `S` is the graph's transport.
+pub struct GraphObserver<S: Transport = ipc::Service> {
+    lifecycle: iceoryx2::port::subscriber::Subscriber<S, Lifecycle, ()>,
+    node: Node<S>,
 }
 
-impl GraphObserver {
+impl GraphObserver<ipc::Service> {
     /// Joins `domain` (creating the lifecycle service) and removes stale resources of dead
     /// nodes. Catches SIGINT/SIGTERM: see [`GraphObserver::wait`].
     pub fn new(domain: &Domain) -> Result<Self, NodeError> {
+        Self::join(domain)
+    }
+}
+
+impl<S: Transport> GraphObserver<S> {
+    /// [`GraphObserver::new`] in a graph on transport `S`.
+    pub fn join(domain: &Domain) -> Result<Self, NodeError> {
         let node = NodeBuilder::new()
             .config(&domain.iceoryx_config())
-            .create::<ipc::Service>()
+            .create::<S>()
             .map_err(|e| NodeError::Node(e.to_string()))?;
         let lifecycle = lifecycle_service(&node)?
             .subscriber_builder()
@@ -72,7 +79,7 @@ impl GraphObserver {
     }
 
     /// The underlying iceoryx2 node.
-    pub fn node(&self) -> &Node<ipc::Service> {
+    pub fn node(&self) -> &Node<S> {
         &self.node
     }
 }

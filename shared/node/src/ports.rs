@@ -1,9 +1,10 @@
-//! Typed publish-subscribe ports that wake waiting subscribers through a paired event.
+//! Typed publish-subscribe ports that wake waiting subscribers through their transport (a
+//! paired event per service, or the consumers' doorbells).
 
+use crate::transport::Transport;
 use crate::NodeError;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::{ipc, ZeroCopySend};
+use iceoryx2::service::port_factory::publish_subscribe;
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
@@ -12,26 +13,29 @@ pub trait Message: Debug + ZeroCopySend + Copy + 'static {}
 impl<T: Debug + ZeroCopySend + Copy + 'static> Message for T {}
 
 /// The raw iceoryx2 client of a request-response service.
-pub type Client<Req, Resp> = iceoryx2::port::client::Client<ipc::Service, Req, (), Resp, ()>;
+pub type Client<Req, Resp, S = ipc::Service> = iceoryx2::port::client::Client<S, Req, (), Resp, ()>;
 /// The raw iceoryx2 server of a request-response service.
-pub type Server<Req, Resp> = iceoryx2::port::server::Server<ipc::Service, Req, (), Resp, ()>;
+pub type Server<Req, Resp, S = ipc::Service> = iceoryx2::port::server::Server<S, Req, (), Resp, ()>;
 
 /// Publishes `T` on a service and wakes every [`Subscriber`] of it that is waiting.
-pub struct Publisher<T: Message> {
-    port: iceoryx2::port::publisher::Publisher<ipc::Service, T, ()>,
-    notifier: Notifier<ipc::Service>,
+pub struct Publisher<T: Message, S: Transport = ipc::Service> {
+    port: iceoryx2::port::publisher::Publisher<S, T, ()>,
+    wake: S::Wake,
+    factory: publish_subscribe::PortFactory<S, T, ()>,
     service: String,
 }
 
-impl<T: Message> Publisher<T> {
+impl<T: Message, S: Transport> Publisher<T, S> {
     pub(crate) fn new(
-        port: iceoryx2::port::publisher::Publisher<ipc::Service, T, ()>,
-        notifier: Notifier<ipc::Service>,
+        port: iceoryx2::port::publisher::Publisher<S, T, ()>,
+        wake: S::Wake,
+        factory: publish_subscribe::PortFactory<S, T, ()>,
         service: &str,
     ) -> Self {
         Self {
             port,
-            notifier,
+            wake,
+            factory,
             service: service.to_owned(),
         }
     }
@@ -41,10 +45,7 @@ impl<T: Message> Publisher<T> {
         self.port
             .send_copy(value)
             .map_err(|e| NodeError::port(&self.service, "send", e))?;
-        self.notifier
-            .notify()
-            .map_err(|e| NodeError::port(&self.service, "notify", e))?;
-        Ok(())
+        S::wake_subscribers(&self.wake, &self.factory, &self.service)
     }
 
     /// The service name.
@@ -54,21 +55,21 @@ impl<T: Message> Publisher<T> {
 }
 
 /// Receives `T` from a service; can block until data arrives, with a timeout.
-pub struct Subscriber<T: Message> {
-    port: iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
-    listener: Listener<ipc::Service>,
+pub struct Subscriber<T: Message, S: Transport = ipc::Service> {
+    port: iceoryx2::port::subscriber::Subscriber<S, T, ()>,
+    inbox: S::Inbox,
     service: String,
 }
 
-impl<T: Message> Subscriber<T> {
+impl<T: Message, S: Transport> Subscriber<T, S> {
     pub(crate) fn new(
-        port: iceoryx2::port::subscriber::Subscriber<ipc::Service, T, ()>,
-        listener: Listener<ipc::Service>,
+        port: iceoryx2::port::subscriber::Subscriber<S, T, ()>,
+        inbox: S::Inbox,
         service: &str,
     ) -> Self {
         Self {
             port,
-            listener,
+            inbox,
             service: service.to_owned(),
         }
     }
@@ -113,22 +114,11 @@ impl<T: Message> Subscriber<T> {
             if left.is_zero() {
                 return Ok(None);
             }
-            match self.listener.timed_wait(|_| {}, left) {
-                Ok(_) => {}
+            if S::wait_inbox(&self.inbox, left).is_err() {
                 // Interrupted by a signal: let the caller look at the stop request.
-                Err(_) => return self.try_recv(),
+                return self.try_recv();
             }
         }
-    }
-
-    /// Clears pending wake-ups (the data stays readable).
-    pub(crate) fn clear_wakeups(&self) {
-        // A failed wake-up drain only costs one spurious wake-up later.
-        let _ = self.listener.try_wait(|_| {});
-    }
-
-    pub(crate) fn listener(&self) -> &Listener<ipc::Service> {
-        &self.listener
     }
 
     /// The service name.
@@ -137,23 +127,22 @@ impl<T: Message> Subscriber<T> {
     }
 }
 
-/// A subscriber of any message type, for waiting on several at once
-/// ([`crate::NodeRuntime::run_on_data`]).
-pub trait Waitable {
-    /// The event listener that fires when data arrives.
+/// An input of a main loop ([`crate::NodeRuntime::run_on_data`]): a subscriber of any message
+/// type (or, on the doorbell transport, a server), for waiting on several at once.
+pub trait Waitable<S: Transport = ipc::Service> {
+    /// How the input is woken: its event listener, or its event id of the doorbell.
     #[doc(hidden)]
-    fn wake_listener(&self) -> &Listener<ipc::Service>;
-    /// Clears pending wake-ups after a wake.
+    #[allow(private_interfaces)]
+    fn wake_listener(&self) -> &S::Inbox;
+    /// Clears pending wake-ups after a wake (the data stays readable).
     #[doc(hidden)]
-    fn clear(&self);
+    fn clear(&self) {
+        S::clear_inbox(self.wake_listener());
+    }
 }
 
-impl<T: Message> Waitable for Subscriber<T> {
-    fn wake_listener(&self) -> &Listener<ipc::Service> {
-        self.listener()
-    }
-
-    fn clear(&self) {
-        self.clear_wakeups();
+impl<T: Message, S: Transport> Waitable<S> for Subscriber<T, S> {
+    fn wake_listener(&self) -> &S::Inbox {
+        &self.inbox
     }
 }

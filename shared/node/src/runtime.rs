@@ -1,17 +1,16 @@
 //! [`NodeRuntime`]: the iceoryx2 node of one process, its lifecycle and its main loops.
 
 use crate::ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
+use crate::transport::Transport;
 use crate::{monotonic_ns, Domain, NodeError};
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::{
-    ipc, CallbackProgression, NodeBuilder, NodeName, ServiceName, WaitSetAttachmentId,
-    WaitSetBuilder,
-};
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::prelude::{ipc, NodeBuilder, NodeName, ServiceName};
+use iceoryx2_bb_posix::signal::SignalHandler;
 use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
 use std::path::PathBuf;
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 /// Environment variable holding the node's name in the launch file (set by the launcher).
@@ -98,7 +97,9 @@ impl LoopCtx {
 }
 
 /// The runtime of one SABR process: iceoryx2 node in the graph's domain, typed ports,
-/// lifecycle announcements (readiness, heartbeat, stopping, done) and signal-aware loops.
+/// lifecycle announcements (readiness, heartbeat, stopping, done) and signal-aware loops, on
+/// transport `S` (stock iceoryx2 events by default, or the futex [`crate::Doorbell`]: every
+/// process of a domain uses the same).
 ///
 /// ```no_run
 /// use sabr_node::NodeRuntime;
@@ -116,130 +117,43 @@ impl LoopCtx {
 ///     Ok(())
 /// }
 /// ```
-pub struct NodeRuntime {
-    node: Node<ipc::Service>,
+pub struct NodeRuntime<S: Transport = ipc::Service> {
+    // Ports before the node they were made by: fields drop in order.
+    lifecycle: iceoryx2::port::publisher::Publisher<S, Lifecycle, ()>,
+    inbound: S::Inbound,
+    node: Rc<Node<S>>,
     name: String,
     label: NodeLabel,
     domain: Domain,
-    lifecycle: iceoryx2::port::publisher::Publisher<ipc::Service, Lifecycle, ()>,
     lifecycle_seq: u64,
     state: LifecycleState,
     last_heartbeat: Instant,
     stop_requested: bool,
 }
 
-impl NodeRuntime {
+impl NodeRuntime<ipc::Service> {
     /// Starts the runtime of a service process: logging to stderr, the node name from
     /// [`NODE_NAME_ENV`] (else `default_name`), the domain from [`crate::DOMAIN_ENV`], stale
     /// resources of dead nodes removed, SIGINT/SIGTERM caught, `Starting` announced.
     pub fn start(default_name: &str) -> Result<Self, NodeError> {
-        crate::init_tracing();
-        let name = std::env::var(NODE_NAME_ENV).unwrap_or_else(|_| default_name.to_owned());
-        Self::with_domain(&name, Domain::from_env()?)
+        Self::start_on(default_name)
     }
 
     /// Like [`NodeRuntime::start`] with an explicit name and domain, ignoring the environment
     /// (and leaving logging set-up to the caller).
     pub fn with_domain(name: &str, domain: Domain) -> Result<Self, NodeError> {
-        let label = validate_node_name(name)?;
-        let node_name = NodeName::new(name).map_err(|e| NodeError::InvalidName {
-            name: name.to_owned(),
-            reason: format!("{e:?}"),
-        })?;
-        let node = NodeBuilder::new()
-            .name(&node_name)
-            .config(&domain.iceoryx_config())
-            .create::<ipc::Service>()
-            .map_err(|e| NodeError::Node(e.to_string()))?;
-        // Creation already removed dead nodes; a second pass waits for any other process that
-        // was cleaning up at the same moment.
-        let cleanup = node.blocking_cleanup_dead_nodes(Duration::from_millis(500));
-        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
-            tracing::info!(
-                removed = cleanup.cleanups,
-                failed = cleanup.failed_cleanups,
-                "removed stale iceoryx2 resources of dead nodes"
-            );
-        }
-        // Installs iceoryx2's SIGINT/SIGTERM handler now rather than at the first wait, so a stop
-        // request during set-up is seen instead of killing the process.
-        let stop_requested = node.wait(Duration::ZERO).is_err();
-        let lifecycle = lifecycle_service(&node)?
-            .publisher_builder()
-            .create()
-            .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "create publisher", e))?;
-        let mut runtime = Self {
-            node,
-            name: name.to_owned(),
-            label,
-            domain,
-            lifecycle,
-            lifecycle_seq: 0,
-            state: LifecycleState::Starting,
-            last_heartbeat: Instant::now(),
-            stop_requested,
-        };
-        runtime.announce(LifecycleState::Starting);
-        tracing::info!(node = name, domain = %runtime.domain, pid = std::process::id(), "starting");
-        Ok(runtime)
+        Self::in_domain(name, domain)
     }
 
-    /// The node's name.
-    pub fn name(&self) -> &str {
-        &self.name
+    /// A notifier on the event service named `service` (publishers use the same name to wake
+    /// their subscribers; a request-response client may use it to wake its server).
+    pub fn notifier(&self, service: &str) -> Result<Notifier<ipc::Service>, NodeError> {
+        notifier_on(&self.node, service)
     }
 
-    /// The domain the node lives in.
-    pub fn domain(&self) -> &Domain {
-        &self.domain
-    }
-
-    /// The underlying iceoryx2 node, for anything the helpers below do not cover.
-    pub fn node(&self) -> &Node<ipc::Service> {
-        &self.node
-    }
-
-    /// A publisher of `T` on a publish-subscribe service (see `sabr_msgs::services`).
-    pub fn publisher<T: Message>(&self, service: &str) -> Result<Publisher<T>, NodeError> {
-        let port = self
-            .node
-            .service_builder(&service_name(service)?)
-            .publish_subscribe::<T>()
-            .history_size(services::history_size(service))
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open service", e))?
-            .publisher_builder()
-            .create()
-            .map_err(|e| NodeError::port(service, "create publisher", e))?;
-        Ok(Publisher::new(port, self.notifier(service)?, service))
-    }
-
-    /// A subscriber of `T` on a publish-subscribe service, woken by its publishers. On
-    /// connecting it receives the publishers' latest sample, if any.
-    pub fn subscriber<T: Message>(&self, service: &str) -> Result<Subscriber<T>, NodeError> {
-        self.subscriber_with_history(service, 1)
-    }
-
-    /// A subscriber that, on connecting, first receives up to `history` of the samples each
-    /// publisher sent before (oldest first; at most `services::history_size(service)`), so
-    /// a restarted node can rebuild state from what it missed.
-    pub fn subscriber_with_history<T: Message>(
-        &self,
-        service: &str,
-        history: usize,
-    ) -> Result<Subscriber<T>, NodeError> {
-        let port = self
-            .node
-            .service_builder(&service_name(service)?)
-            .publish_subscribe::<T>()
-            .history_size(services::history_size(service))
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open service", e))?
-            .subscriber_builder()
-            .history_request(history.min(services::history_size(service)))
-            .create()
-            .map_err(|e| NodeError::port(service, "create subscriber", e))?;
-        Ok(Subscriber::new(port, self.listener(service)?, service))
+    /// A listener on the event service named `service`.
+    pub fn listener(&self, service: &str) -> Result<Listener<ipc::Service>, NodeError> {
+        listener_on(&self.node, service)
     }
 
     /// A client of a request-response service (e.g. `services::IK_SOLVE`).
@@ -271,30 +185,135 @@ impl NodeRuntime {
             .create()
             .map_err(|e| NodeError::port(service, "create server", e))
     }
+}
 
-    /// A notifier on the event service named `service` (publishers use the same name to wake
-    /// their subscribers; a request-response client may use it to wake its server).
-    pub fn notifier(&self, service: &str) -> Result<Notifier<ipc::Service>, NodeError> {
-        self.node
-            .service_builder(&service_name(service)?)
-            .event()
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open event service", e))?
-            .notifier_builder()
-            .create()
-            .map_err(|e| NodeError::port(service, "create notifier", e))
+impl<S: Transport> NodeRuntime<S> {
+    /// [`NodeRuntime::start`] on transport `S`.
+    pub fn start_on(default_name: &str) -> Result<Self, NodeError> {
+        crate::init_tracing();
+        let name = std::env::var(NODE_NAME_ENV).unwrap_or_else(|_| default_name.to_owned());
+        Self::in_domain(&name, Domain::from_env()?)
     }
 
-    /// A listener on the event service named `service`.
-    pub fn listener(&self, service: &str) -> Result<Listener<ipc::Service>, NodeError> {
-        self.node
-            .service_builder(&service_name(service)?)
-            .event()
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open event service", e))?
-            .listener_builder()
+    /// [`NodeRuntime::with_domain`] on transport `S`.
+    pub fn in_domain(name: &str, domain: Domain) -> Result<Self, NodeError> {
+        let label = validate_node_name(name)?;
+        let node_name = NodeName::new(name).map_err(|e| NodeError::InvalidName {
+            name: name.to_owned(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&domain.iceoryx_config())
+            .create::<S>()
+            .map_err(|e| NodeError::Node(e.to_string()))?;
+        // Creation already removed dead nodes; a second pass waits for any other process that
+        // was cleaning up at the same moment.
+        let cleanup = node.blocking_cleanup_dead_nodes(Duration::from_millis(500));
+        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
+            tracing::info!(
+                removed = cleanup.cleanups,
+                failed = cleanup.failed_cleanups,
+                "removed stale iceoryx2 resources of dead nodes"
+            );
+        }
+        // Installs iceoryx2's SIGINT/SIGTERM handler now rather than at the first wait, so a stop
+        // request during set-up is seen instead of killing the process.
+        let stop_requested = node.wait(Duration::ZERO).is_err();
+        let lifecycle = lifecycle_service(&node)?
+            .publisher_builder()
             .create()
-            .map_err(|e| NodeError::port(service, "create listener", e))
+            .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "create publisher", e))?;
+        let inbound = S::open_inbound(&node)?;
+        let mut runtime = Self {
+            inbound,
+            node: Rc::new(node),
+            name: name.to_owned(),
+            label,
+            domain,
+            lifecycle,
+            lifecycle_seq: 0,
+            state: LifecycleState::Starting,
+            last_heartbeat: Instant::now(),
+            stop_requested,
+        };
+        runtime.announce(LifecycleState::Starting);
+        tracing::info!(node = name, domain = %runtime.domain, pid = std::process::id(), "starting");
+        Ok(runtime)
+    }
+
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The domain the node lives in.
+    pub fn domain(&self) -> &Domain {
+        &self.domain
+    }
+
+    /// The underlying iceoryx2 node, for anything the helpers below do not cover.
+    pub fn node(&self) -> &Node<S> {
+        &self.node
+    }
+
+    pub(crate) fn shared_node(&self) -> &Rc<Node<S>> {
+        &self.node
+    }
+
+    pub(crate) fn inbound(&self) -> &S::Inbound {
+        &self.inbound
+    }
+
+    /// A publisher of `T` on a publish-subscribe service (see `sabr_msgs::services`).
+    pub fn publisher<T: Message>(&self, service: &str) -> Result<Publisher<T, S>, NodeError> {
+        let factory = self
+            .node
+            .service_builder(&service_name(service)?)
+            .publish_subscribe::<T>()
+            .history_size(services::history_size(service))
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?;
+        let port = factory
+            .publisher_builder()
+            .create()
+            .map_err(|e| NodeError::port(service, "create publisher", e))?;
+        let wake = S::wake(&self.node, service)?;
+        Ok(Publisher::new(port, wake, factory, service))
+    }
+
+    /// A subscriber of `T` on a publish-subscribe service, woken by its publishers. On
+    /// connecting it receives the publishers' latest sample, if any.
+    pub fn subscriber<T: Message>(&self, service: &str) -> Result<Subscriber<T, S>, NodeError> {
+        self.subscriber_with_history(service, 1)
+    }
+
+    /// A subscriber that, on connecting, first receives up to `history` of the samples each
+    /// publisher sent before (oldest first; at most `services::history_size(service)`), so
+    /// a restarted node can rebuild state from what it missed.
+    pub fn subscriber_with_history<T: Message>(
+        &self,
+        service: &str,
+        history: usize,
+    ) -> Result<Subscriber<T, S>, NodeError> {
+        let inbox = S::inbox(&self.node, &self.inbound, service)?;
+        let factory = self
+            .node
+            .service_builder(&service_name(service)?)
+            .publish_subscribe::<T>()
+            .history_size(services::history_size(service))
+            .open_or_create()
+            .map_err(|e| NodeError::port(service, "open service", e))?;
+        let mut builder = factory
+            .subscriber_builder()
+            .history_request(history.min(services::history_size(service)));
+        if let Some(name) = S::port_name(&inbox) {
+            builder = builder.name(name);
+        }
+        let port = builder
+            .create()
+            .map_err(|e| NodeError::port(service, "create subscriber", e))?;
+        Ok(Subscriber::new(port, inbox, service))
     }
 
     /// Announces readiness to the launcher: call once the ports are set up. The loops call it
@@ -315,7 +334,13 @@ impl NodeRuntime {
     /// False once a stop was requested (SIGINT/SIGTERM). Also sends the heartbeat when due:
     /// a hand-written loop calls this every iteration.
     pub fn keep_running(&mut self) -> bool {
-        self.sleep(Duration::ZERO)
+        // The flag iceoryx2's signal handler sets, read without a system call (a wake-up of
+        // the doorbell transport costs only a few).
+        if !self.stop_requested && SignalHandler::termination_requested() {
+            self.stop_requested = true;
+        }
+        self.heartbeat_if_due();
+        !self.stop_requested
     }
 
     /// Sleeps up to `duration`, returning early with `false` on a stop request; sends the
@@ -367,69 +392,50 @@ impl NodeRuntime {
     /// idle call is where a node notices a stalled or dead peer (see [`crate::Deadline`]).
     pub fn run_on_data<E>(
         &mut self,
-        inputs: &[&dyn Waitable],
+        inputs: &[&dyn Waitable<S>],
+        idle: Duration,
+        body: impl FnMut(&mut LoopCtx) -> Result<(), E>,
+    ) -> Result<Exit, E> {
+        self.ready();
+        let inbound = self.inbound.clone();
+        let looped = S::with_waiter(&inbound, inputs, |wait| {
+            self.on_data_loop(wait, inputs, idle, body)
+        });
+        match looped {
+            Ok(result) => result,
+            Err(error) => {
+                tracing::error!(%error, "cannot wait on the inputs; leaving the loop");
+                Ok(self.leave(Exit::Signal))
+            }
+        }
+    }
+
+    /// The loop of [`NodeRuntime::run_on_data`], waiting with `wait` (up to a timeout).
+    fn on_data_loop<E>(
+        &mut self,
+        wait: &mut dyn FnMut(Duration) -> crate::transport::sealed::Waited,
+        inputs: &[&dyn Waitable<S>],
         idle: Duration,
         mut body: impl FnMut(&mut LoopCtx) -> Result<(), E>,
     ) -> Result<Exit, E> {
-        self.ready();
         let mut ctx = LoopCtx::new();
-        let waitset = match WaitSetBuilder::new().create::<ipc::Service>() {
-            Ok(waitset) => waitset,
-            Err(error) => {
-                tracing::error!(?error, "cannot create a WaitSet; leaving the loop");
-                return Ok(self.leave(Exit::Signal));
-            }
-        };
-        let mut guards = Vec::with_capacity(inputs.len());
-        for input in inputs {
-            match waitset.attach_notification(input.wake_listener()) {
-                Ok(guard) => guards.push(guard),
-                Err(error) => {
-                    tracing::error!(?error, "cannot wait on an input; leaving the loop");
-                    return Ok(self.leave(Exit::Signal));
-                }
-            }
-        }
-        let ids: Vec<WaitSetAttachmentId<ipc::Service>> =
-            guards.iter().map(WaitSetAttachmentId::from_guard).collect();
-        let heartbeat = match waitset.attach_interval(HEARTBEAT_PERIOD) {
-            Ok(guard) => guard,
-            Err(error) => {
-                tracing::error!(
-                    ?error,
-                    "cannot attach the heartbeat interval; leaving the loop"
-                );
-                return Ok(self.leave(Exit::Signal));
-            }
-        };
         let mut last_body = Instant::now();
         loop {
-            let mut woke_on_data = false;
             let until_idle = idle.saturating_sub(last_body.elapsed());
-            let result = waitset.wait_and_process_once_with_timeout(
-                |id| {
-                    woke_on_data |= ids.contains(&id);
-                    CallbackProgression::Continue
-                },
-                until_idle,
-            );
-            match result {
-                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                    self.stop_requested = true;
-                }
-                Ok(_) => {}
-                Err(error) => tracing::warn!(?error, "WaitSet wait failed"),
+            let until_heartbeat = HEARTBEAT_PERIOD.saturating_sub(self.last_heartbeat.elapsed());
+            let waited = wait(until_idle.min(until_heartbeat));
+            if waited.stop {
+                self.stop_requested = true;
             }
             if !self.keep_running() {
-                drop(heartbeat);
                 return Ok(self.leave(Exit::Signal));
             }
-            if woke_on_data {
+            if waited.data {
                 inputs.iter().for_each(|input| input.clear());
             }
-            if woke_on_data || last_body.elapsed() >= idle {
+            if waited.data || last_body.elapsed() >= idle {
                 ctx.now = Instant::now();
-                ctx.woke_on_data = woke_on_data;
+                ctx.woke_on_data = waited.data;
                 body(&mut ctx)?;
                 ctx.tick += 1;
                 last_body = Instant::now();
@@ -473,7 +479,7 @@ impl NodeRuntime {
     }
 }
 
-impl Drop for NodeRuntime {
+impl<S: Transport> Drop for NodeRuntime<S> {
     fn drop(&mut self) {
         self.announce(LifecycleState::Stopping);
         tracing::info!(node = %self.name, "stopped");
@@ -481,10 +487,10 @@ impl Drop for NodeRuntime {
 }
 
 /// The lifecycle service with its fixed capacities (every process opens it identically).
-pub(crate) fn lifecycle_service(
-    node: &Node<ipc::Service>,
+pub(crate) fn lifecycle_service<S: Transport>(
+    node: &Node<S>,
 ) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, Lifecycle, ()>,
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<S, Lifecycle, ()>,
     NodeError,
 > {
     node.service_builder(&service_name(services::GRAPH_LIFECYCLE)?)
@@ -495,6 +501,34 @@ pub(crate) fn lifecycle_service(
         .history_size(0)
         .open_or_create()
         .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "open service", e))
+}
+
+/// A notifier on the event service named `service` (stock transport).
+pub(crate) fn notifier_on(
+    node: &Node<ipc::Service>,
+    service: &str,
+) -> Result<Notifier<ipc::Service>, NodeError> {
+    node.service_builder(&service_name(service)?)
+        .event()
+        .open_or_create()
+        .map_err(|e| NodeError::port(service, "open event service", e))?
+        .notifier_builder()
+        .create()
+        .map_err(|e| NodeError::port(service, "create notifier", e))
+}
+
+/// A listener on the event service named `service` (stock transport).
+pub(crate) fn listener_on(
+    node: &Node<ipc::Service>,
+    service: &str,
+) -> Result<Listener<ipc::Service>, NodeError> {
+    node.service_builder(&service_name(service)?)
+        .event()
+        .open_or_create()
+        .map_err(|e| NodeError::port(service, "open event service", e))?
+        .listener_builder()
+        .create()
+        .map_err(|e| NodeError::port(service, "create listener", e))
 }
 
 pub(crate) fn service_name(service: &str) -> Result<ServiceName, NodeError> {

@@ -1,0 +1,314 @@
+//! The doorbell of a process ([`Bell`]), the event ids of its inbound ports ([`Inbox`]) and
+//! the producer side that rings consumers' doorbells ([`Ringer`]).
+
+use super::Doorbell;
+use crate::NodeError;
+use iceoryx2::identifiers::UniqueNodeId;
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::{EventId, PortName, ServiceName};
+use iceoryx2::service::port_factory::event;
+use sabr_msgs::services;
+use std::cell::{Cell, RefCell};
+use std::rc::Rc;
+use std::time::Duration;
+
+/// Highest event id of a doorbell: at most 63 inbound ports per process (id 0 is unused).
+const EVENT_ID_MAX: usize = 63;
+/// Producers that may ring one doorbell at once (one notifier per producer port).
+const MAX_RINGERS: usize = 64;
+/// Nodes that may hold one doorbell's service open.
+const MAX_NODES: usize = 64;
+/// Prefix of the port name that carries an inbound port's event id.
+const PORT_NAME_PREFIX: &str = "doorbell-";
+
+/// The doorbell service of the node with `id`.
+fn doorbell_service(id: &UniqueNodeId) -> Result<ServiceName, NodeError> {
+    let name = format!("{}/{id}", services::GRAPH_DOORBELLS);
+    ServiceName::new(&name).map_err(|e| NodeError::port(&name, "parse service name", e))
+}
+
+/// The event id an inbound port carries in its name, if it is a doorbell port.
+fn event_id_of(port: &PortName) -> Option<EventId> {
+    let id: usize = port.as_str().strip_prefix(PORT_NAME_PREFIX)?.parse().ok()?;
+    (1..=EVENT_ID_MAX).contains(&id).then(|| EventId::new(id))
+}
+
+/// Why a wait on the doorbell ended early.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Interrupted;
+
+/// The one inbound doorbell of a process: an event listener on its own service, and which
+/// event ids rang and were not looked at yet.
+pub struct Bell {
+    listener: Listener<Doorbell>,
+    _service: event::PortFactory<Doorbell>,
+    /// Bit `i`: event id `i` rang and no one took it yet.
+    pending: Cell<u64>,
+    /// Bit `i`: event id `i` belongs to no inbound port.
+    free: Cell<u64>,
+    name: String,
+}
+
+impl Bell {
+    /// Creates the doorbell of `node` (its service must not exist yet).
+    pub(crate) fn open(node: &Node<Doorbell>) -> Result<Rc<Self>, NodeError> {
+        let service_name = doorbell_service(node.id())?;
+        let name = service_name.to_string();
+        let service = node
+            .service_builder(&service_name)
+            .event()
+            .max_listeners(1)
+            .max_notifiers(MAX_RINGERS)
+            .max_nodes(MAX_NODES)
+            .event_id_max_value(EVENT_ID_MAX)
+            .create()
+            .map_err(|e| NodeError::port(&name, "create the doorbell", e))?;
+        let listener = service
+            .listener_builder()
+            .create()
+            .map_err(|e| NodeError::port(&name, "listen on the doorbell", e))?;
+        Ok(Rc::new(Self {
+            listener,
+            _service: service,
+            pending: Cell::new(0),
+            // Every id but 0.
+            free: Cell::new(!1),
+            name,
+        }))
+    }
+
+    /// An event id for a new inbound port.
+    pub(crate) fn allocate(self: &Rc<Self>) -> Result<Inbox, NodeError> {
+        let free = self.free.get();
+        if free == 0 {
+            return Err(NodeError::Port {
+                service: self.name.clone(),
+                operation: "allocate an event id",
+                reason: format!("all {EVENT_ID_MAX} event ids of the doorbell are in use"),
+            });
+        }
+        let id = free.trailing_zeros() as usize;
+        self.free.set(free & !(1 << id));
+        self.pending.set(self.pending.get() & !(1 << id));
+        let port_name = format!("{PORT_NAME_PREFIX}{id}");
+        let port_name =
+            PortName::new(&port_name).map_err(|e| NodeError::port(&self.name, "name a port", e))?;
+        Ok(Inbox {
+            bell: Rc::clone(self),
+            id,
+            port_name,
+        })
+    }
+
+    /// Sleeps until the doorbell rings or `timeout` passes, then records the ids that rang;
+    /// does not sleep if an id of `wanted` (bit `i`: id `i`) is pending already. `Err` on a
+    /// signal.
+    pub(crate) fn wait_for(&self, wanted: u64, timeout: Duration) -> Result<(), Interrupted> {
+        let result = if self.pending.get() & wanted != 0 || timeout.is_zero() {
+            self.listener
+                .try_wait(|activation| self.record(activation.id))
+        } else {
+            self.listener
+                .timed_wait(|activation| self.record(activation.id), timeout)
+        };
+        match result {
+            Ok(_) => Ok(()),
+            Err(_) => Err(Interrupted),
+        }
+    }
+
+    fn record(&self, id: EventId) {
+        if id.as_value() <= EVENT_ID_MAX {
+            self.pending.set(self.pending.get() | (1 << id.as_value()));
+        }
+    }
+
+    /// True if an id of `mask` rang and was not taken yet.
+    pub(crate) fn any_pending(&self, mask: u64) -> bool {
+        self.pending.get() & mask != 0
+    }
+
+    /// True (and forgotten) if an id of `mask` rang since it was last taken.
+    fn take(&self, mask: u64) -> bool {
+        let pending = self.pending.get();
+        self.pending.set(pending & !mask);
+        pending & mask != 0
+    }
+
+    fn release(&self, id: usize) {
+        self.free.set(self.free.get() | (1 << id));
+        self.pending.set(self.pending.get() & !(1 << id));
+    }
+}
+
+/// The event id of one inbound port on its process's doorbell; released when dropped.
+pub struct Inbox {
+    bell: Rc<Bell>,
+    id: usize,
+    port_name: PortName,
+}
+
+impl Inbox {
+    /// The iceoryx2 port name that tells producers the id (`doorbell-<id>`).
+    pub(crate) fn port_name(&self) -> &PortName {
+        &self.port_name
+    }
+
+    /// This port's id as a bit mask of the doorbell's ids.
+    pub(crate) fn mask(&self) -> u64 {
+        1 << self.id
+    }
+
+    /// True (and forgotten) if this port's id rang.
+    pub(crate) fn take(&self) -> bool {
+        self.bell.take(self.mask())
+    }
+
+    /// Sleeps on the doorbell up to `timeout` unless this port's id rang already; true if it
+    /// rang (other ids stay pending for their ports).
+    pub(crate) fn wait(&self, timeout: Duration) -> Result<bool, Interrupted> {
+        self.bell.wait_for(self.mask(), timeout)?;
+        Ok(self.take())
+    }
+}
+
+impl Drop for Inbox {
+    fn drop(&mut self) {
+        self.bell.release(self.id);
+    }
+}
+
+/// One consumer port a producer may ring: its node, its event id, and whether this ring is
+/// for it (a server answers one client of several).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Consumer {
+    node: UniqueNodeId,
+    id: EventId,
+    ring: bool,
+}
+
+/// The producer side of one port: rings the doorbells of the consumer ports of its service.
+///
+/// The consumer ports are re-read from the service's dynamic config on every ring, so ports
+/// that appear (a restarted node) are rung from their first sample on and ports that went
+/// away (iceoryx2 removes dead nodes' ports) are not rung any more; a notifier per consumer
+/// node is opened when its first port appears and closed when its last one goes.
+pub struct Ringer {
+    node: Rc<Node<Doorbell>>,
+    service: String,
+    /// The consumers rung last time, and the notifier of each one's node.
+    consumers: RefCell<Vec<(Consumer, Rc<Notifier<Doorbell>>)>>,
+    /// Scratch list of the consumers now in the dynamic config.
+    current: RefCell<Vec<Consumer>>,
+}
+
+impl Ringer {
+    /// A ringer for a port of `service` (its name for errors) created by `node`.
+    pub(crate) fn new(node: &Rc<Node<Doorbell>>, service: &str) -> Self {
+        Self {
+            node: Rc::clone(node),
+            service: service.to_owned(),
+            consumers: RefCell::new(Vec::new()),
+            current: RefCell::new(Vec::new()),
+        }
+    }
+
+    /// Rings the consumer ports that `list` visits (node id, port name, and whether to ring
+    /// it now; ports without a doorbell id are skipped), keeping a notifier for every port
+    /// visited. Returns how many were rung.
+    pub(crate) fn ring(
+        &self,
+        list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, bool)),
+    ) -> Result<usize, NodeError> {
+        let mut current = self.current.borrow_mut();
+        current.clear();
+        list(&mut |node, port, ring| {
+            if let Some(id) = event_id_of(port) {
+                current.push(Consumer { node, id, ring });
+            }
+        });
+        let mut consumers = self.consumers.borrow_mut();
+        let same_port = |a: &Consumer, b: &Consumer| a.node == b.node && a.id == b.id;
+        if consumers.len() == current.len()
+            && consumers
+                .iter()
+                .zip(current.iter())
+                .all(|((c, _), n)| same_port(c, n))
+        {
+            for ((consumer, _), now) in consumers.iter_mut().zip(current.iter()) {
+                consumer.ring = now.ring;
+            }
+        } else {
+            let connected = self.connect(&consumers, &current);
+            *consumers = connected;
+        }
+        let mut rung = 0;
+        for (consumer, notifier) in consumers.iter().filter(|(c, _)| c.ring) {
+            notifier
+                .notify_with_custom_event_id(consumer.id)
+                .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
+            rung += 1;
+        }
+        Ok(rung)
+    }
+
+    /// Notifiers for `current`, reusing those of `previous` by node; a consumer whose
+    /// doorbell cannot be opened (yet) is left out and tried again on the next ring.
+    fn connect(
+        &self,
+        previous: &[(Consumer, Rc<Notifier<Doorbell>>)],
+        current: &[Consumer],
+    ) -> Vec<(Consumer, Rc<Notifier<Doorbell>>)> {
+        let mut connected: Vec<(Consumer, Rc<Notifier<Doorbell>>)> =
+            Vec::with_capacity(current.len());
+        for consumer in current {
+            let known = connected
+                .iter()
+                .chain(previous.iter())
+                .find(|(c, _)| c.node == consumer.node)
+                .map(|(_, notifier)| Rc::clone(notifier));
+            let notifier = match known {
+                Some(notifier) => notifier,
+                None => match self.open(&consumer.node) {
+                    Ok(notifier) => Rc::new(notifier),
+                    Err(error) => {
+                        tracing::debug!(%error, service = %self.service, "doorbell not reachable yet");
+                        continue;
+                    }
+                },
+            };
+            connected.push((*consumer, notifier));
+        }
+        connected
+    }
+
+    fn open(&self, node: &UniqueNodeId) -> Result<Notifier<Doorbell>, NodeError> {
+        let service_name = doorbell_service(node)?;
+        let name = service_name.to_string();
+        self.node
+            .service_builder(&service_name)
+            .event()
+            .open()
+            .map_err(|e| NodeError::port(&name, "open a consumer's doorbell", e))?
+            .notifier_builder()
+            .create()
+            .map_err(|e| NodeError::port(&name, "create a notifier", e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn port_names_carry_event_ids_in_range() {
+        let name = |text: &str| PortName::new(text).unwrap();
+        assert_eq!(event_id_of(&name("doorbell-1")), Some(EventId::new(1)));
+        assert_eq!(event_id_of(&name("doorbell-63")), Some(EventId::new(63)));
+        for other in ["doorbell-0", "doorbell-64", "doorbell-x", "publisher", ""] {
+            assert_eq!(event_id_of(&name(other)), None, "{other:?}");
+        }
+    }
+}

@@ -1,0 +1,232 @@
+//! How the processes of a graph wake each other: the [`Transport`] a [`crate::NodeRuntime`]
+//! runs on.
+//!
+//! - `ipc::Service` (stock iceoryx2): every publish-subscribe service has a paired event
+//!   service of the same name; each subscriber listens on its own, the loops wait on them in
+//!   a `WaitSet` (the event is a Unix datagram socket).
+//! - [`crate::Doorbell`]: one futex doorbell per process; producers ring their consumers'
+//!   doorbells with the consumer port's event id (see [`crate::doorbell`]).
+
+use crate::doorbell::{Bell, Doorbell, Inbox, Ringer};
+use crate::ports::{Message, Waitable};
+use crate::NodeError;
+use iceoryx2::node::Node;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::{
+    ipc, CallbackProgression, PortFactory, PortName, WaitSetAttachmentId, WaitSetBuilder,
+};
+use iceoryx2::service::port_factory::publish_subscribe;
+use iceoryx2::waitset::WaitSetRunResult;
+use sealed::Waited;
+use std::rc::Rc;
+use std::time::Duration;
+
+/// An iceoryx2 service variant a graph can run on (`ipc::Service` or [`crate::Doorbell`]).
+/// Every process of a domain must use the same one.
+pub trait Transport: sealed::Sealed {}
+
+impl Transport for ipc::Service {}
+impl Transport for Doorbell {}
+
+pub(crate) mod sealed {
+    use super::*;
+
+    /// What one wait of a main loop saw.
+    #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+    pub struct Waited {
+        /// An input of the loop rang (its data may be read).
+        pub data: bool,
+        /// A termination signal arrived.
+        pub stop: bool,
+    }
+
+    /// The wake-up operations of a transport (not implementable outside this crate).
+    pub trait Sealed: iceoryx2::service::Service + 'static {
+        /// Per-process inbound state: nothing, or the process's doorbell.
+        type Inbound: Clone;
+        /// How a subscriber is woken: its own listener, or an event id of the doorbell.
+        type Inbox;
+        /// How a publisher wakes its subscribers: a notifier, or a doorbell ringer.
+        type Wake;
+
+        /// The process's inbound state, created once with the node.
+        fn open_inbound(node: &Node<Self>) -> Result<Self::Inbound, NodeError>;
+
+        /// The wake-up of a new subscriber of `service`.
+        fn inbox(
+            node: &Node<Self>,
+            inbound: &Self::Inbound,
+            service: &str,
+        ) -> Result<Self::Inbox, NodeError>;
+
+        /// The port name an inbound port must carry, if the transport needs one.
+        fn port_name(inbox: &Self::Inbox) -> Option<&PortName>;
+
+        /// The wake-up side of a new publisher of `service`.
+        fn wake(node: &Rc<Node<Self>>, service: &str) -> Result<Self::Wake, NodeError>;
+
+        /// Wakes the subscribers of `service` after a send.
+        fn wake_subscribers<T: Message>(
+            wake: &Self::Wake,
+            service: &publish_subscribe::PortFactory<Self, T, ()>,
+            name: &str,
+        ) -> Result<(), NodeError>;
+
+        /// Sleeps up to `timeout` for the inbox to be woken; `Err` on a signal.
+        fn wait_inbox(inbox: &Self::Inbox, timeout: Duration) -> Result<(), ()>;
+
+        /// Forgets pending wake-ups of the inbox.
+        fn clear_inbox(inbox: &Self::Inbox);
+
+        /// Calls `run` with a function that waits up to a timeout for any of `inputs`.
+        fn with_waiter<R>(
+            inbound: &Self::Inbound,
+            inputs: &[&dyn Waitable<Self>],
+            run: impl FnOnce(&mut dyn FnMut(Duration) -> Waited) -> R,
+        ) -> Result<R, NodeError>
+        where
+            Self: Transport;
+    }
+}
+
+impl sealed::Sealed for ipc::Service {
+    type Inbound = ();
+    type Inbox = Listener<ipc::Service>;
+    type Wake = Notifier<ipc::Service>;
+
+    fn open_inbound(_node: &Node<Self>) -> Result<(), NodeError> {
+        Ok(())
+    }
+
+    fn inbox(node: &Node<Self>, _inbound: &(), service: &str) -> Result<Self::Inbox, NodeError> {
+        crate::runtime::listener_on(node, service)
+    }
+
+    fn port_name(_inbox: &Self::Inbox) -> Option<&PortName> {
+        None
+    }
+
+    fn wake(node: &Rc<Node<Self>>, service: &str) -> Result<Self::Wake, NodeError> {
+        crate::runtime::notifier_on(node, service)
+    }
+
+    fn wake_subscribers<T: Message>(
+        wake: &Self::Wake,
+        _service: &publish_subscribe::PortFactory<Self, T, ()>,
+        name: &str,
+    ) -> Result<(), NodeError> {
+        wake.notify()
+            .map(drop)
+            .map_err(|e| NodeError::port(name, "notify", e))
+    }
+
+    fn wait_inbox(inbox: &Self::Inbox, timeout: Duration) -> Result<(), ()> {
+        inbox.timed_wait(|_| {}, timeout).map(drop).map_err(drop)
+    }
+
+    fn clear_inbox(inbox: &Self::Inbox) {
+        // A failed wake-up drain only costs one spurious wake-up later.
+        let _ = inbox.try_wait(|_| {});
+    }
+
+    fn with_waiter<R>(
+        _inbound: &(),
+        inputs: &[&dyn Waitable<Self>],
+        run: impl FnOnce(&mut dyn FnMut(Duration) -> Waited) -> R,
+    ) -> Result<R, NodeError> {
+        let waitset = WaitSetBuilder::new()
+            .create::<ipc::Service>()
+            .map_err(|e| NodeError::port("(waitset)", "create a WaitSet", e))?;
+        let mut guards = Vec::with_capacity(inputs.len());
+        for input in inputs {
+            let guard = waitset
+                .attach_notification(input.wake_listener())
+                .map_err(|e| NodeError::port("(waitset)", "wait on an input", e))?;
+            guards.push(guard);
+        }
+        let ids: Vec<WaitSetAttachmentId<ipc::Service>> =
+            guards.iter().map(WaitSetAttachmentId::from_guard).collect();
+        let mut wait = |timeout: Duration| {
+            let mut waited = Waited::default();
+            let result = waitset.wait_and_process_once_with_timeout(
+                |id| {
+                    waited.data |= ids.contains(&id);
+                    CallbackProgression::Continue
+                },
+                timeout,
+            );
+            match result {
+                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
+                    waited.stop = true;
+                }
+                Ok(_) => {}
+                Err(error) => tracing::warn!(?error, "WaitSet wait failed"),
+            }
+            waited
+        };
+        Ok(run(&mut wait))
+    }
+}
+
+impl sealed::Sealed for Doorbell {
+    type Inbound = Rc<Bell>;
+    type Inbox = Inbox;
+    type Wake = Ringer;
+
+    fn open_inbound(node: &Node<Self>) -> Result<Rc<Bell>, NodeError> {
+        Bell::open(node)
+    }
+
+    fn inbox(_node: &Node<Self>, bell: &Rc<Bell>, _service: &str) -> Result<Inbox, NodeError> {
+        bell.allocate()
+    }
+
+    fn port_name(inbox: &Inbox) -> Option<&PortName> {
+        Some(inbox.port_name())
+    }
+
+    fn wake(node: &Rc<Node<Self>>, service: &str) -> Result<Ringer, NodeError> {
+        Ok(Ringer::new(node, service))
+    }
+
+    fn wake_subscribers<T: Message>(
+        wake: &Ringer,
+        service: &publish_subscribe::PortFactory<Self, T, ()>,
+        _name: &str,
+    ) -> Result<(), NodeError> {
+        wake.ring(|visit| {
+            service.dynamic_config().list_subscribers(|details| {
+                visit(details.node_id, &details.subscriber_name, true);
+                CallbackProgression::Continue
+            })
+        })
+        .map(drop)
+    }
+
+    fn wait_inbox(inbox: &Inbox, timeout: Duration) -> Result<(), ()> {
+        inbox.wait(timeout).map(drop).map_err(drop)
+    }
+
+    fn clear_inbox(inbox: &Inbox) {
+        inbox.take();
+    }
+
+    fn with_waiter<R>(
+        bell: &Rc<Bell>,
+        inputs: &[&dyn Waitable<Self>],
+        run: impl FnOnce(&mut dyn FnMut(Duration) -> Waited) -> R,
+    ) -> Result<R, NodeError> {
+        let wanted = inputs
+            .iter()
+            .fold(0, |mask, input| mask | input.wake_listener().mask());
+        let mut wait = |timeout: Duration| {
+            let stop = bell.wait_for(wanted, timeout).is_err();
+            Waited {
+                data: bell.any_pending(wanted),
+                stop,
+            }
+        };
+        Ok(run(&mut wait))
+    }
+}
