@@ -1,4 +1,4 @@
-//! The SABR calibration engine: turns a recording (robot-model.md §7) into a calibrated
+//! The SABR calibration engine: turns a recording (docs/robot-model.md §7) into a calibrated
 //! robot model, a JSON report and an HTML report. The `sabr calibrate` command and the live
 //! calibrator process share this one code path.
 //!

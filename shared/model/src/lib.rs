@@ -1,7 +1,7 @@
 //! The SABR robot model: joint/encoder map, forward and inverse kinematics of the two
 //! 5-bar stages and the needle, marker poses, calibration parameters and effect models.
 //!
-//! Everything follows `robot-model.md` (the project contract). Units: millimetres and
+//! Everything follows `docs/robot-model.md` (the project contract). Units: millimetres and
 //! radians. No I/O: parameter files are parsed from and written to strings.
 
 pub mod effects;
@@ -15,7 +15,7 @@ pub use params::{
     RobotParams,
 };
 
-/// A joint vector θ1..θ5 in radians (robot-model.md §2).
+/// A joint vector θ1..θ5 in radians (docs/robot-model.md §2).
 pub type Joints = [f64; 5];
 
 /// Raw incremental encoder counts c1..c5, zero at power-up.

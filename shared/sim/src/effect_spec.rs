@@ -1,7 +1,7 @@
 //! Effects injected into the simulated rig and their command-line syntax
 //! `name:key=value,key=value`, e.g. `ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.3`.
 //!
-//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in robot-model.md; the model's
+//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in docs/robot-model.md; the model's
 //! [`Effect`] values inside use its 0-based indices.
 
 use std::fmt;
