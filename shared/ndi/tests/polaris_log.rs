@@ -227,7 +227,7 @@ fn check_stray_markers(replies: &[(&Exchange, TrackingReply)]) {
         assert_eq!(set.len(), 3);
         for (marker, expected) in set.iter().zip(reference) {
             assert!(!marker.out_of_volume);
-            let p = marker.position.unwrap();
+            let p = marker.position;
             for axis in 0..3 {
                 assert!(
                     (p[axis] - expected[axis]).abs() < 0.5,
