@@ -1,5 +1,5 @@
 //! `sabr fk` and `sabr ik`: forward and inverse kinematics over CSV files
-//! (robot-model.md §3–§4). Output goes to standard output as CSV with a header line, one row
+//! (docs/robot-model.md §3–§4). Output goes to standard output as CSV with a header line, one row
 //! per input row; a row that has no solution becomes `error,<reason>` and makes the command
 //! exit with a failure status after all rows are written.
 
@@ -43,7 +43,7 @@ pub struct IkArgs {
     params: PathBuf,
     /// CSV of targets with header x,y,z,ux,uy,uz: tip (mm) and needle direction (any length
     /// but zero) in the robot base frame Bb. Of several solutions the one nearest the home
-    /// joints of robot-model.md §3 is printed.
+    /// joints of docs/robot-model.md §3 is printed.
     #[arg(long, value_name = "CSV")]
     targets: PathBuf,
 }

@@ -5,7 +5,7 @@ use std::process::Command;
 
 use sabr_model::RobotParams;
 
-/// The four test vectors of robot-model.md §3: joints, then tip and direction.
+/// The four test vectors of docs/robot-model.md §3: joints, then tip and direction.
 const VECTORS: [[f64; 11]; 4] = [
     [
         -2.368404, -0.777628, 0.0, -2.685073, -0.601543, 0.0, -90.0, 180.0, 0.0, 0.0, 1.0,

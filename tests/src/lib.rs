@@ -33,6 +33,17 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// Serialises the multi-process tests of one test executable: each holds the guard for its
+/// whole run. Plain `cargo test` runs a test executable's tests on parallel threads (and test
+/// executables one after another); live graphs with 1 kHz deadlines on 2 cores must not share
+/// the machine, so every test of this crate starts with `let _alone = run_alone();`. Under
+/// nextest each test is its own process and `.config/nextest.toml` runs them one at a time.
+pub fn run_alone() -> std::sync::MutexGuard<'static, ()> {
+    static ALONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    // A test that panicked while holding the guard leaves nothing to repair.
+    ALONE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// A fresh domain for one test: `it-<test>-<pid>`.
 pub fn test_domain(test: &str) -> Domain {
     Domain::new(&format!("it-{test}-{}", std::process::id())).expect("valid test domain")

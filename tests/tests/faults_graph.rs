@@ -5,7 +5,7 @@
 //! or shared memory of the domain is left afterwards.
 //!
 //! Needs the service binaries next to the test executable: `cargo build --workspace --bins`
-//! (CI: `cargo build --release --workspace --bins` before `cargo nextest run --release`).
+//! (CI: `cargo build --release --workspace --bins` before `cargo test --release`).
 
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
@@ -183,6 +183,7 @@ fn rows(file: &Path) -> usize {
 
 #[test]
 fn killed_sync_is_restarted_and_matched_samples_flow_again_within_2_s() {
+    let _alone = sabr_integration_tests::run_alone();
     let mut graph = start("fault-sync", &with_optional(&["sync", "recorder"]));
     let probe = Probe::new(&graph);
     let last = flowing(&probe.matched, |m| m.seq, LONG);
@@ -216,6 +217,7 @@ fn killed_sync_is_restarted_and_matched_samples_flow_again_within_2_s() {
 
 #[test]
 fn killed_recorder_is_restarted_and_records_again_within_2_s() {
+    let _alone = sabr_integration_tests::run_alone();
     let mut graph = start("fault-rec", &with_optional(&["sync", "recorder"]));
     let probe = Probe::new(&graph);
     flowing(&probe.encoders, |s| s.seq, LONG);
@@ -262,6 +264,7 @@ fn killed_recorder_is_restarted_and_records_again_within_2_s() {
 
 #[test]
 fn killed_encoders_are_restarted_and_samples_flow_again_within_2_s() {
+    let _alone = sabr_integration_tests::run_alone();
     let mut graph = start("fault-enc", SHIPPED);
     let probe = Probe::new(&graph);
     let last = flowing(&probe.encoders, |s| s.seq, LONG);
@@ -326,6 +329,7 @@ fn killed_encoders_are_restarted_and_samples_flow_again_within_2_s() {
 
 #[test]
 fn killed_tracker_reconnects_to_the_rig_and_frames_flow_again_within_2_s() {
+    let _alone = sabr_integration_tests::run_alone();
     let mut graph = start("fault-trk", SHIPPED);
     let probe = Probe::new(&graph);
     let last = flowing(&probe.frames, |f| f.seq, LONG);
@@ -355,6 +359,7 @@ fn killed_tracker_reconnects_to_the_rig_and_frames_flow_again_within_2_s() {
 
 #[test]
 fn a_required_node_dying_stops_the_graph_cleanly_with_failure() {
+    let _alone = sabr_integration_tests::run_alone();
     let mut graph = start("fault-req", SHIPPED);
     let pids: Vec<u32> = NODES.iter().map(|n| pid_of(&mut graph, n)).collect();
     let killed = sigkill(pids[0]);

@@ -73,6 +73,7 @@ fn collect<T: sabr_node::Message>(stream: &Subscriber<T>, duration: Duration) ->
 
 #[test]
 fn frozen_encoders_stop_the_motion_within_50_ms_of_the_deadline_and_the_robot_rests() {
+    let _alone = sabr_integration_tests::run_alone();
     for node in ["rig", "encoders", "tracker", "motion"] {
         bin(&format!("sabr-{node}"));
     }

@@ -151,6 +151,7 @@ fn norm(v: &[f64]) -> f64 {
 
 #[test]
 fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
+    let _alone = sabr_integration_tests::run_alone();
     let domain = test_domain("hw-chain");
     let _guard = DomainGuard(domain.clone());
     assert!(
@@ -411,6 +412,7 @@ fn wait_exit(node: &mut NodeProcess, timeout: Duration) -> Option<ExitStatus> {
 
 #[test]
 fn a_stalled_rig_is_noticed_by_encoders_and_tracker() {
+    let _alone = sabr_integration_tests::run_alone();
     let domain = test_domain("hw-stall");
     let _guard = DomainGuard(domain.clone());
     assert!(

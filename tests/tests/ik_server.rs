@@ -19,11 +19,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// The home joints of robot-model.md §3, the `near` that `sabr ik` uses.
+/// The home joints of docs/robot-model.md §3, the `near` that `sabr ik` uses.
 const HOME_JOINTS: [f64; 5] = [-2.368404, -0.777628, 0.0, -2.685073, -0.601543];
 const LONG: Duration = Duration::from_secs(15);
 
-/// A calibrated parameter file (robot-model.md §7 plus joint offsets) with needle length `l_n`.
+/// A calibrated parameter file (docs/robot-model.md §7 plus joint offsets) with needle length `l_n`.
 fn params_toml(l_n: f64) -> String {
     format!(
         r#"format = 1
@@ -54,7 +54,7 @@ rate_hz = 20.0
     )
 }
 
-/// Reachable targets (tip mm, direction) from robot-model.md §3's test vectors.
+/// Reachable targets (tip mm, direction) from docs/robot-model.md §3's test vectors.
 const TARGETS: [[f64; 6]; 4] = [
     [0.0, -90.0, 180.0, 0.0, 0.0, 1.0],
     [0.6994, -102.5676, 172.3905, 0.006198, -0.106914, 0.994249],
@@ -208,6 +208,7 @@ fn assert_matches_sabr_ik(response: &IkResponse, expected: &Result<Vec<f64>, Str
 
 #[test]
 fn ik_server_answers_like_sabr_ik_and_refuses_bad_targets() {
+    let _alone = sabr_integration_tests::run_alone();
     let domain = test_domain("ik-answers");
     let dir = tempfile::tempdir().unwrap();
     let params = dir.path().join("params.toml");
@@ -253,6 +254,7 @@ fn ik_server_answers_like_sabr_ik_and_refuses_bad_targets() {
 
 #[test]
 fn ik_server_reloads_announced_parameters_and_keeps_them_when_a_file_is_corrupt() {
+    let _alone = sabr_integration_tests::run_alone();
     let domain = test_domain("ik-reload");
     let dir = tempfile::tempdir().unwrap();
     let first = dir.path().join("params.toml");

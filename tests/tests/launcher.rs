@@ -22,6 +22,7 @@ fn assert_all_gone(graph: &mut LaunchedGraph) {
 
 #[test]
 fn starts_in_dependency_order_and_stops_cleanly() {
+    let _alone = sabr_integration_tests::run_alone();
     // Written out of order: the launcher must start a, then b, then c.
     let toml = r#"
 [[node]]
@@ -74,6 +75,7 @@ args = ["--ready-delay-ms", "100"]
 
 #[test]
 fn a_killed_node_is_restarted_and_data_flows_again_within_2_s() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = r#"
 [[node]]
 name = "anchor"
@@ -138,6 +140,7 @@ required = false
 
 #[test]
 fn a_node_without_heartbeat_is_killed_and_restarted() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = r#"
 [[node]]
 name = "anchor"
@@ -168,6 +171,7 @@ heartbeat_timeout_s = 0.5
 
 #[test]
 fn a_required_node_ending_stops_the_graph_with_failure() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = r#"
 [[node]]
 name = "steady"
@@ -197,6 +201,7 @@ required = true
 
 #[test]
 fn a_node_ignoring_stop_requests_is_killed_and_cleaned_up() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = r#"
 [graph]
 stop_grace_s = 0.3
@@ -229,6 +234,7 @@ args = ["--ignore-stop"]
 
 #[test]
 fn a_node_announcing_done_ends_the_graph_with_success() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = r#"
 [[node]]
 name = "idle"
@@ -253,6 +259,7 @@ depends_on = ["idle"]
 
 #[test]
 fn a_malformed_launch_file_is_rejected_with_file_line_and_reason() {
+    let _alone = sabr_integration_tests::run_alone();
     let toml = "[[node]]\nname = \"a\"\nexec = \"sabr-test-node\"\ndepends_on = [\"nowhere\"]\n";
     let mut graph = LaunchedGraph::start("malformed", toml, &[], false);
     let status = graph.wait_exit(LONG).expect("launcher exits");

@@ -123,6 +123,7 @@ fn params(path: &Path) -> RobotParams {
 
 #[test]
 fn live_parameters_equal_sabr_calibrate_on_the_recording() {
+    let _alone = sabr_integration_tests::run_alone();
     let Finished {
         success,
         run,
@@ -191,6 +192,7 @@ fn live_parameters_equal_sabr_calibrate_on_the_recording() {
 
 #[test]
 fn a_session_without_tip_readings_is_refused() {
+    let _alone = sabr_integration_tests::run_alone();
     let Finished {
         success,
         run,

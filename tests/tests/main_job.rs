@@ -48,6 +48,7 @@ fn number(value: &serde_json::Value, what: &str) -> f64 {
 
 #[test]
 fn the_main_job_calibrates_and_passes_the_straight_line_test() {
+    let _alone = sabr_integration_tests::run_alone();
     let text = std::fs::read_to_string(LAUNCH_FILE).expect("read the launch file");
     let started = Instant::now();
     let mut graph = LaunchedGraph::start("mainjob", &text, &[], false);

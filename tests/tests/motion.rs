@@ -183,6 +183,7 @@ fn release(domain: &Domain) {
 
 #[test]
 fn motion_refuses_an_out_of_limit_plan_before_any_setpoint() {
+    let _alone = sabr_integration_tests::run_alone();
     let domain = test_domain("motion-refuse");
     let dir = tempfile::tempdir().unwrap();
     let watch = Watch::new(&domain);
@@ -319,6 +320,7 @@ fn assert_holds(status: &MotionStatus, setpoints: &[MotorSetpoint]) {
 
 #[test]
 fn a_stalled_encoder_stream_stops_motion_within_50_ms_of_its_deadline() {
+    let _alone = sabr_integration_tests::run_alone();
     let (status, last_sample_ns, setpoints, stderr) = stall_one_stream("motion-enc", true);
     assert!(
         status.reason.as_str().starts_with("encoder feedback stale"),
@@ -341,6 +343,7 @@ fn a_stalled_encoder_stream_stops_motion_within_50_ms_of_its_deadline() {
 
 #[test]
 fn a_stalled_tracker_stream_stops_motion_within_50_ms_of_its_deadline() {
+    let _alone = sabr_integration_tests::run_alone();
     let (status, last_frame_ns, setpoints, stderr) = stall_one_stream("motion-trk", false);
     assert!(
         status.reason.as_str().starts_with("tracker feedback stale"),

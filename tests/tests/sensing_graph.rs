@@ -159,6 +159,7 @@ fn announce_latency(probe: &Probe, dir: &Path, latency_ms: f64) {
 
 #[test]
 fn sim_sensing_graph_matches_to_truth_records_and_stops_cleanly() {
+    let _alone = sabr_integration_tests::run_alone();
     let launch = std::fs::read_to_string(LAUNCH_FILE).expect("read the launch file");
     let mut graph = LaunchedGraph::start("sensing", &launch, &[], true);
     for node in ["rig", "encoders", "tracker", "sync", "recorder"] {
@@ -363,6 +364,7 @@ fn sim_sensing_graph_matches_to_truth_records_and_stops_cleanly() {
 
 #[test]
 fn a_killed_recorder_leaves_a_readable_recording_and_its_restart_records_anew() {
+    let _alone = sabr_integration_tests::run_alone();
     use nix::sys::signal::{kill, Signal};
     use nix::unistd::Pid;
 

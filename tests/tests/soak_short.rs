@@ -44,6 +44,7 @@ fn number(row: &BTreeMap<String, String>, column: &str) -> f64 {
 
 #[test]
 fn a_short_soak_loses_no_encoder_sample_and_memory_stays_bounded() {
+    let _alone = sabr_integration_tests::run_alone();
     let out = tempfile::tempdir().unwrap();
     let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch/graphs/sim-sensing.toml");
     let domain = format!("it-soak-{}", std::process::id());

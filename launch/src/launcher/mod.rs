@@ -6,11 +6,13 @@
 //! done, or a required node ending; then removes the domain's iceoryx2 leftovers. Each node's
 //! stdout and stderr go to `runs/<id>/logs/<node>.log`. See [`spec`] for the file format.
 
+mod build;
 pub mod placement;
 mod run_dir;
 pub mod spec;
 mod supervisor;
 
+pub use build::build_graph_executables;
 pub use run_dir::RunDir;
 pub use supervisor::{describe, StopReason};
 
@@ -35,7 +37,8 @@ pub struct LaunchArgs {
     /// Stop the graph (successfully) after this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
-    /// Directory of the node executables [default: the directory of this executable].
+    /// Directory of the node executables [default: the directory of this executable; a cargo
+    /// build of this workspace builds the ones the launch file names first].
     #[arg(long)]
     pub bin_dir: Option<PathBuf>,
     /// Only validate the launch file and print the start order.
@@ -61,6 +64,9 @@ pub fn bin_dir_or_beside_sabr(dir: Option<&Path>) -> anyhow::Result<PathBuf> {
 /// be started; an error for a bad launch file or arguments.
 pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     let bin_dir = bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
+    if args.bin_dir.is_none() && !args.check {
+        build_graph_executables(&args.file, &bin_dir)?;
+    }
     let graph = spec::load(&args.file, &bin_dir)?;
     spec::check_placements(&graph)?;
     if args.check {

@@ -135,6 +135,9 @@ struct Live {
 pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     let plan = Plan::new(args)?;
     let bin_dir = sabr::launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
+    if args.bin_dir.is_none() {
+        sabr::launcher::build_graph_executables(&args.graph, &bin_dir)?;
+    }
     let graph = spec::load(&args.graph, &bin_dir)?;
     let domain = Domain::new(
         &args

@@ -1,6 +1,6 @@
 //! Homing into the mechanical stops: every joint is driven towards its stop at a constant
 //! speed until its encoder shows it stalled, then held there; once all are stalled the robot
-//! dwells, and the counts at the stops give the joint offsets (robot-model.md §2).
+//! dwells, and the counts at the stops give the joint offsets (docs/robot-model.md §2).
 
 use crate::limits::stop_sides;
 use sabr_model::{Counts, Joints, RobotParams, JOINT_COUNT};

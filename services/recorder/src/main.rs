@@ -1,5 +1,5 @@
 //! `sabr-recorder`: writes the live streams of the graph as a recording (format v1,
-//! robot-model.md §7) that `sabr calibrate` reads offline.
+//! docs/robot-model.md §7) that `sabr calibrate` reads offline.
 //!
 //! Subscribes to `sabr/encoders/samples` (→ `encoders.csv`), `sabr/tracker/frames`
 //! (→ `tracker.csv`, one row per tool), and `sabr/motion/phases` and `sabr/rig/phases`

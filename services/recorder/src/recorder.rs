@@ -1,4 +1,4 @@
-//! The live streams turned into recording rows (robot-model.md §7) and written as they come.
+//! The live streams turned into recording rows (docs/robot-model.md §7) and written as they come.
 
 use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
 use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};

@@ -15,7 +15,7 @@ use sabr_calibration::model::biopsy::BiopsyModel;
 use sabr_calibration::model::{blocks_of, Problem};
 use sabr_model::{JointMotion, RobotParams};
 
-/// Joints of the home pose of robot-model.md §3 (rad).
+/// Joints of the home pose of docs/robot-model.md §3 (rad).
 const HOME: [f64; 5] = [-2.368404, -0.777628, 0.0, -2.685073, -0.601543];
 
 /// A perturbed "true" model and noise-free observations of it along a multi-sine

@@ -1,4 +1,4 @@
-//! Forward and inverse kinematics (robot-model.md §3–§4). All poses in `Bb`, mm and rad.
+//! Forward and inverse kinematics (docs/robot-model.md §3–§4). All poses in `Bb`, mm and rad.
 
 use std::borrow::Cow;
 use std::f64::consts::TAU;
@@ -14,7 +14,7 @@ mod stage;
 
 use stage::FiveBar;
 
-/// The home pose of robot-model.md §3 (needle along +z, tip at (0, −90, 180) mm in `Bb`):
+/// The home pose of docs/robot-model.md §3 (needle along +z, tip at (0, −90, 180) mm in `Bb`):
 /// joint angles θ1..θ5 (rad). A good `near` for [`inverse`] when nothing better is known.
 pub const HOME_JOINTS: Joints = [-2.368404, -0.777628, 0.0, -2.685073, -0.601543];
 
@@ -76,7 +76,7 @@ fn rotate_x(angle: f64, v: &Vector3<f64>) -> Vector3<f64> {
     Vector3::new(v.x, c * v.y - s * v.z, s * v.y + c * v.z)
 }
 
-/// Steps 1–4 of robot-model.md §3 without building poses.
+/// Steps 1–4 of docs/robot-model.md §3 without building poses.
 fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, KinematicsError> {
     check_finite_joints(q, "joint angles")?;
     let front_planar = FiveBar::front(geometry).forward(q[0], q[1]);

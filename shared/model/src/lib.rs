@@ -2,7 +2,7 @@
 //! 5-bar stages and the needle, marker poses, calibration parameters, effect models and the
 //! calibration session plan (which the simulator and the motion executor both run).
 //!
-//! Everything follows `robot-model.md` (the project contract). Units: millimetres and
+//! Everything follows `docs/robot-model.md` (the project contract). Units: millimetres and
 //! radians. No I/O: parameter files are parsed from and written to strings.
 //!
 //! Serial and branched arms described by URDF are [`tree::KinematicTree`]s
@@ -28,7 +28,7 @@ pub use params::{
 };
 pub use tree::{KinematicTree, LinkId, TargetJacobian, TreeError, TreeState};
 
-/// A joint vector θ1..θ5 in radians (robot-model.md §2).
+/// A joint vector θ1..θ5 in radians (docs/robot-model.md §2).
 pub type Joints = [f64; 5];
 
 /// Raw incremental encoder counts c1..c5, zero at power-up.

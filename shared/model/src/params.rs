@@ -1,7 +1,7 @@
 //! Calibration parameters: geometry, joint/encoder map, marker mountings and effects,
 //! loaded from `robot.toml` (format 1) or from a calibrated `params.toml` (a superset).
 //!
-//! The file layout is robot-model.md §7. A calibrated `params.toml` adds
+//! The file layout is docs/robot-model.md §7. A calibrated `params.toml` adds
 //! `joints.joint_offset = [θ_off,1..5]` (rad), `[[effects]]` tables (an [`Effect`] each, tagged
 //! by `kind`) and an optional free-form `[calibration]` table ([`CalibrationInfo`]).
 
@@ -35,7 +35,7 @@ pub struct Geometry {
     pub front_base: Isometry3<f64>,
 }
 
-/// Encoder-to-joint map of robot-model.md §2: `θ = GR · 2π · counts / cpr + θ_off`.
+/// Encoder-to-joint map of docs/robot-model.md §2: `θ = GR · 2π · counts / cpr + θ_off`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointCalibration {
     /// Counts per motor revolution (4 × CPT).
@@ -74,7 +74,7 @@ pub struct CalibrationInfo {
 }
 
 /// Where the tracker should see the tools for a needle pose, all in the base-marker frame `M`
-/// (mm): `T_M_X = T_M_Bb · T_Bb_X` (robot-model.md §5).
+/// (mm): `T_M_X = T_M_Bb · T_Bb_X` (docs/robot-model.md §5).
 #[derive(Debug, Clone, PartialEq)]
 pub struct MarkerPoses {
     /// `T_M_Tf`: the front marker tool.
@@ -140,7 +140,7 @@ const EFFECT_INVERSION_ITERATIONS: usize = 100;
 const EFFECT_INVERSION_TOLERANCE: f64 = 1e-13;
 
 impl RobotParams {
-    /// The nominal model of robot-model.md (the `robot.toml` example), without offsets.
+    /// The nominal model of docs/robot-model.md (the `robot.toml` example), without offsets.
     pub fn nominal() -> Self {
         Self {
             geometry: Geometry {
@@ -461,7 +461,7 @@ fn nudge(x: f64, steps: i64) -> f64 {
     f64::from_bits(bits as u64)
 }
 
-/// The file layout of robot-model.md §7 (plus the calibrated extensions).
+/// The file layout of docs/robot-model.md §7 (plus the calibrated extensions).
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ParamsFile {

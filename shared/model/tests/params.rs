@@ -6,7 +6,7 @@ use sabr_model::effects::Link;
 use sabr_model::params::CalibrationInfo;
 use sabr_model::{Effect, ParamsError, RobotParams};
 
-/// The `robot.toml` example of robot-model.md §7, verbatim.
+/// The `robot.toml` example of docs/robot-model.md §7, verbatim.
 const ROBOT_TOML: &str = r#"format = 1
 [geometry]          # mm
 l_f = 50.0

@@ -1,10 +1,10 @@
-//! The four forward-kinematics test vectors of robot-model.md §3 and the IK of each.
+//! The four forward-kinematics test vectors of docs/robot-model.md §3 and the IK of each.
 
 use nalgebra::{Point3, Vector3};
 use sabr_model::HOME_JOINTS;
 use sabr_model::{forward, inverse, RobotParams};
 
-/// θ1..θ5 (rad), tip (mm), z_N — copied from robot-model.md §3.
+/// θ1..θ5 (rad), tip (mm), z_N — copied from docs/robot-model.md §3.
 const VECTORS: [([f64; 5], [f64; 3], [f64; 3]); 4] = [
     (
         [-2.368404, -0.777628, 0.0, -2.685073, -0.601543],

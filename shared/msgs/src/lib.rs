@@ -5,7 +5,7 @@
 //! (`sabr.<Type>.v1`) so that processes built separately agree on the layout; changing a layout
 //! means bumping the version in the type name. Times `t_ns` are host `CLOCK_MONOTONIC` in
 //! nanoseconds (the same clock as the recording format), lengths are millimetres and angles
-//! radians, as in `shared/robot-model.md`.
+//! radians, as in `docs/robot-model.md`.
 
 // The `ZeroCopySend` derive expands to an `unsafe impl`; the derive checks `repr(C)` and that
 // every field is itself `ZeroCopySend`, which is the whole safety contract.

@@ -1,4 +1,4 @@
-//! The live messages as recording rows (robot-model.md §7): the one conversion `sabr-recorder`
+//! The live messages as recording rows (docs/robot-model.md §7): the one conversion `sabr-recorder`
 //! writes to disk and the live calibrator keeps in memory, so both hold the same session.
 
 use crate::{EncoderSample, PhaseMark, Tool, ToolSample, ToolStatus, TrackerFrame};

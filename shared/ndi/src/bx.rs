@@ -5,15 +5,17 @@
 //! missing, 0x04 disabled) and, unless disabled, the data of each reply option in order —
 //! 0x0001: 8 f32 LE (q0 qx qy qz, x y z mm, rms mm) if valid, then port status (u32) and frame
 //! number (u32); 0x0002: tool info (u8) + marker info (10 bytes); 0x0004: marker status (u8) and,
-//! if it is not 0x00, 3 f32 (mm). After the handles, option 0x1000: marker count (u8),
-//! out-of-volume bits (⌈n/8⌉ bytes, bit j of byte k = marker 8k+j), then 3 f32 per marker
-//! (out-of-volume markers only with option 0x0800). Last: system status (u16 LE).
+//! when [`ActiveMarker::carries_position`], 3 f32 (mm); 0x0008: the tool's markers as a marker
+//! list. After the handles, option 0x1000: the stray passive markers as a marker list. Last:
+//! system status (u16 LE). A marker list is a count (u8), out-of-volume bits (⌈n/8⌉ bytes, bit j
+//! of byte k = marker 8k+j), then 3 f32 per marker (mm); out-of-volume markers are listed only
+//! with option 0x0800.
 
 use crate::crc::crc16;
 use crate::error::{EncodeError, ReplyError};
 use crate::reply::{
-    ActiveMarker, HandleReading, HandleStatus, ReplyOptions, StrayMarker, ToolInfo, TrackingReply,
-    Transform,
+    ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
+    TrackingReply, Transform,
 };
 
 /// The two bytes every BX reply starts with.
@@ -88,7 +90,7 @@ pub fn parse_bx_body(body: &[u8], options: ReplyOptions) -> Result<TrackingReply
         handles.push(parse_handle(&mut b, options)?);
     }
     let stray_markers = if options.contains(ReplyOptions::PASSIVE_STRAYS) {
-        Some(parse_strays(&mut b, options)?)
+        Some(parse_markers(&mut b, 0, "stray marker")?)
     } else {
         None
     };
@@ -143,31 +145,32 @@ fn parse_handle(b: &mut Cursor<'_>, options: ReplyOptions) -> Result<HandleReadi
     }
     if options.contains(ReplyOptions::SINGLE_STRAY) {
         let status = b.u8("active marker status")?;
-        let position = if status != 0 {
+        let position = if ActiveMarker::carries_position(status, options) {
             Some(b.point(handle, "active marker position")?)
         } else {
             None
         };
         reading.active_marker = Some(ActiveMarker { status, position });
     }
+    if options.contains(ReplyOptions::TOOL_MARKERS) {
+        reading.tool_markers = Some(parse_markers(b, handle, "tool marker")?);
+    }
     Ok(reading)
 }
 
-fn parse_strays(b: &mut Cursor<'_>, options: ReplyOptions) -> Result<Vec<StrayMarker>, ReplyError> {
-    let count = usize::from(b.u8("stray marker count")?);
-    let oov = b.take(count.div_ceil(8), "stray out-of-volume bits")?;
-    let all_positions = options.contains(ReplyOptions::OUT_OF_VOLUME);
+/// A marker list: count, out-of-volume bits, positions. `handle` is 0 for stray markers.
+fn parse_markers(
+    b: &mut Cursor<'_>,
+    handle: u8,
+    what: &'static str,
+) -> Result<Vec<MarkerPosition>, ReplyError> {
+    let count = usize::from(b.u8(what)?);
+    let oov = b.take(count.div_ceil(8), "out-of-volume bits")?;
     (0..count)
         .map(|i| {
-            let out_of_volume = oov[i / 8] & (1 << (i % 8)) != 0;
-            let position = if all_positions || !out_of_volume {
-                Some(b.point(0, "stray marker position")?)
-            } else {
-                None
-            };
-            Ok(StrayMarker {
-                position,
-                out_of_volume,
+            Ok(MarkerPosition {
+                out_of_volume: oov[i / 8] & (1 << (i % 8)) != 0,
+                position: b.point(handle, what)?,
             })
         })
         .collect()
@@ -188,22 +191,7 @@ pub fn encode_bx(reply: &TrackingReply) -> Result<Vec<u8>, EncodeError> {
             .stray_markers
             .as_deref()
             .ok_or_else(|| missing(0, ReplyOptions::PASSIVE_STRAYS, "stray markers"))?;
-        body.push(count_byte(strays.len(), "stray markers")?);
-        let mut oov = vec![0u8; strays.len().div_ceil(8)];
-        for (i, marker) in strays.iter().enumerate() {
-            if marker.out_of_volume {
-                oov[i / 8] |= 1 << (i % 8);
-            }
-        }
-        body.extend_from_slice(&oov);
-        for marker in strays {
-            if options.contains(ReplyOptions::OUT_OF_VOLUME) || !marker.out_of_volume {
-                let p = marker.position.ok_or_else(|| {
-                    missing(0, ReplyOptions::PASSIVE_STRAYS, "stray marker position")
-                })?;
-                put_f32s(&mut body, &p);
-            }
-        }
+        encode_markers(&mut body, strays, "stray markers")?;
     }
     body.extend_from_slice(&reply.system_status.to_le_bytes());
     let len = u16::try_from(body.len()).map_err(|_| EncodeError::TooLong(body.len()))?;
@@ -269,12 +257,38 @@ fn encode_handle(
             .active_marker
             .ok_or_else(|| missing(handle, opt, "active marker"))?;
         body.push(marker.status);
-        if marker.status != 0 {
+        if ActiveMarker::carries_position(marker.status, options) {
             let p = marker
                 .position
                 .ok_or_else(|| missing(handle, opt, "active marker position"))?;
             put_f32s(body, &p);
         }
+    }
+    if options.contains(ReplyOptions::TOOL_MARKERS) {
+        let markers = reading
+            .tool_markers
+            .as_deref()
+            .ok_or_else(|| missing(handle, ReplyOptions::TOOL_MARKERS, "tool markers"))?;
+        encode_markers(body, markers, "tool markers")?;
+    }
+    Ok(())
+}
+
+fn encode_markers(
+    body: &mut Vec<u8>,
+    markers: &[MarkerPosition],
+    what: &'static str,
+) -> Result<(), EncodeError> {
+    body.push(count_byte(markers.len(), what)?);
+    let mut oov = vec![0u8; markers.len().div_ceil(8)];
+    for (i, marker) in markers.iter().enumerate() {
+        if marker.out_of_volume {
+            oov[i / 8] |= 1 << (i % 8);
+        }
+    }
+    body.extend_from_slice(&oov);
+    for marker in markers {
+        put_f32s(body, &marker.position);
     }
     Ok(())
 }

@@ -601,7 +601,7 @@ mod tests {
             Err(CommandError::BadParameters { .. })
         ));
         assert!(matches!(
-            Command::decode(b"BX 0008"),
+            Command::decode(b"BX 0010"),
             Err(CommandError::BadParameters { .. })
         ));
         assert!(matches!(

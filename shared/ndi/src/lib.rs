@@ -37,8 +37,10 @@ pub use error::{EncodeError, ReplyError};
 pub use framing::{decode_reply, FramerStats, RawReply, ReadError, ReplyFramer, ReplyReader};
 pub use pty::{Pty, PtyError, ServeStats};
 pub use reply::{
-    ActiveMarker, HandleReading, HandleStatus, ReplyOptions, StrayMarker, ToolInfo, TrackingReply,
-    Transform,
+    ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
+    TrackingReply, Transform,
 };
-pub use server::{FrameSource, NdiServer, ServerMode, ServerStats, SimFrame, SimReading};
+pub use server::{
+    FrameSource, MeasurementVolume, NdiServer, ServerMode, ServerStats, SimFrame, SimReading,
+};
 pub use text::{Acknowledgement, DeviceError, PortHandleStatus};

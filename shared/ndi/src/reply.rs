@@ -6,7 +6,7 @@ use std::ops::BitOr;
 
 /// Reply options of a BX or TX command (a 16-bit mask, sent as 4 hex digits).
 ///
-/// Only the options this crate can parse exist; [`ReplyOptions::new`] rejects any other bit.
+/// [`ReplyOptions::new`] rejects any bit that is not a BX/TX reply option.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct ReplyOptions(u16);
 
@@ -17,12 +17,24 @@ impl ReplyOptions {
     pub const TOOL_INFO: ReplyOptions = ReplyOptions(0x0002);
     /// 0x0004: per handle, the position of a single stray active marker.
     pub const SINGLE_STRAY: ReplyOptions = ReplyOptions(0x0004);
-    /// 0x0800: also report data normally withheld because it is out of the measurement volume.
+    /// 0x0008: per handle, the 3D positions of the markers of its tool.
+    pub const TOOL_MARKERS: ReplyOptions = ReplyOptions(0x0008);
+    /// 0x0800: also report what is normally withheld because it is out of the measurement
+    /// volume: transforms of tools outside it (port status bit 6 set), out-of-volume markers.
     pub const OUT_OF_VOLUME: ReplyOptions = ReplyOptions(0x0800);
     /// 0x1000: after the handles, the stray passive markers.
     pub const PASSIVE_STRAYS: ReplyOptions = ReplyOptions(0x1000);
-    /// Every bit this crate parses.
-    pub const SUPPORTED: u16 = 0x0001 | 0x0002 | 0x0004 | 0x0800 | 0x1000;
+    /// Every bit of the Combined API's BX and TX reply options; this crate parses them all.
+    pub const SUPPORTED: u16 = 0x0001 | 0x0002 | 0x0004 | 0x0008 | 0x0800 | 0x1000;
+    /// Each option bit on its own, in the order their data comes in a reply.
+    pub const EACH: [ReplyOptions; 6] = [
+        ReplyOptions::TRANSFORMS,
+        ReplyOptions::TOOL_INFO,
+        ReplyOptions::SINGLE_STRAY,
+        ReplyOptions::TOOL_MARKERS,
+        ReplyOptions::OUT_OF_VOLUME,
+        ReplyOptions::PASSIVE_STRAYS,
+    ];
 
     /// Options from the mask sent in a command; unknown bits are an error.
     pub fn new(bits: u16) -> Result<Self, ReplyError> {
@@ -113,19 +125,44 @@ pub struct ToolInfo {
 }
 
 /// Reply option 0x0004: a single stray active marker of a handle.
+///
+/// A position follows the status only for a marker that was seen inside the measurement
+/// volume, or seen outside it when option 0x0800 asks for what is normally withheld: a real
+/// Polaris (firmware Rev 020) answers `00` alone for a handle without one, and Rev 021 sends an
+/// out-of-volume status without a position.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ActiveMarker {
-    /// Marker status; 0x00 means missing (no position follows).
+    /// Marker status bits: [`ActiveMarker::VALID`], [`ActiveMarker::OUT_OF_VOLUME`]; 0x00 is
+    /// missing.
     pub status: u8,
-    /// Position in `S` (mm), present whenever `status` is not 0x00.
+    /// Position in `S` (mm), exactly when [`ActiveMarker::carries_position`] says so.
     pub position: Option<[f32; 3]>,
 }
 
-/// Reply option 0x1000: one stray passive marker.
+impl ActiveMarker {
+    /// Status 0x00: no marker seen.
+    pub const MISSING: u8 = 0x00;
+    /// Status bit 0: the marker was seen.
+    pub const VALID: u8 = 0x01;
+    /// Status bit 2: the marker is outside the characterised measurement volume.
+    pub const OUT_OF_VOLUME: u8 = 0x04;
+
+    /// Whether a position follows a marker `status` in a reply with `options`.
+    pub fn carries_position(status: u8, options: ReplyOptions) -> bool {
+        if status & Self::OUT_OF_VOLUME != 0 {
+            options.contains(ReplyOptions::OUT_OF_VOLUME)
+        } else {
+            status & Self::VALID != 0
+        }
+    }
+}
+
+/// One marker of a marker list: a tool's markers (option 0x0008) or the stray passive markers
+/// (option 0x1000). Out-of-volume markers are listed only with option 0x0800.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StrayMarker {
-    /// Position in `S` (mm). Out-of-volume markers have none unless option 0x0800 was given.
-    pub position: Option<[f32; 3]>,
+pub struct MarkerPosition {
+    /// Position in `S` (mm).
+    pub position: [f32; 3],
     /// The marker is outside the characterised measurement volume.
     pub out_of_volume: bool,
 }
@@ -148,6 +185,9 @@ pub struct HandleReading {
     pub tool_info: Option<ToolInfo>,
     /// Option 0x0004, not disabled.
     pub active_marker: Option<ActiveMarker>,
+    /// Option 0x0008, not disabled: the markers of the handle's tool, in the tool definition's
+    /// order.
+    pub tool_markers: Option<Vec<MarkerPosition>>,
 }
 
 impl HandleReading {
@@ -161,6 +201,7 @@ impl HandleReading {
             frame: None,
             tool_info: None,
             active_marker: None,
+            tool_markers: None,
         }
     }
 }
@@ -173,7 +214,7 @@ pub struct TrackingReply {
     /// The handles in the order the device sent them.
     pub handles: Vec<HandleReading>,
     /// Option 0x1000: the stray passive markers; `None` when not requested.
-    pub stray_markers: Option<Vec<StrayMarker>>,
+    pub stray_markers: Option<Vec<MarkerPosition>>,
     /// System status bits (communication sync error, CRC error, ...).
     pub system_status: u16,
 }

@@ -2,8 +2,9 @@
 //!
 //! [`NdiServer`] takes command bytes and produces reply bytes exactly as a Polaris would for the
 //! commands the host driver uses: INIT, RESET, COMM (acknowledged; the speed is recorded, a PTY
-//! has none), VER, BEEP, PHSR, PINIT, PENA, PDIS, TSTART, TSTOP, BX and TX (reply options
-//! 0x0001, 0x0800 and 0x1000 in any combination). Anything else is answered `ERROR01`.
+//! has none), VER, BEEP, PHSR, PINIT, PENA, PDIS, TSTART, TSTOP, BX and TX (every reply option:
+//! 0x0001, 0x0002, 0x0004, 0x0008, 0x0800, 0x1000, in any combination). Anything else is
+//! answered `ERROR01`.
 //!
 //! Tools are wired ports: port handle `i + 1` is tool `i` of each [`SimFrame`], occupied from
 //! power-up (PHSR:02 lists them until PINIT). The rig's convention is handles 1-4 = base, front,
@@ -13,12 +14,27 @@
 //! status valid and a transform whose quaternion is the identity (1, 0, 0, 0) and whose position
 //! is the sphere centre; its rms is the point's rms. With reply option 0x1000 every point is also
 //! listed as a stray passive marker (in volume), which is how a real Polaris would see a lone
-//! sphere. The simulated measurement volume is unbounded, so 0x0800 changes nothing.
+//! sphere.
+//!
+//! **What the reply holds.** Every initialised port handle is reported in handle order: an
+//! enabled one with its data, one that is initialised but not enabled (never enabled, or PDIS)
+//! as DISABLED. A tool whose origin is outside the [`MeasurementVolume`] (unbounded unless
+//! [`NdiServer::with_volume`] sets one) is reported MISSING with port status bit 6 (out of
+//! volume), or valid with that bit when option 0x0800 asks for it; a tool with some markers
+//! outside has bit 7 (partially out of volume). Option 0x0002 gives tool information 0x00 for a
+//! seen tool and 0x02 otherwise, and marker code 3 (used) for each marker of a seen tool (marker
+//! `k` in byte `9 - k/2`, low nibble for even `k`). Option 0x0004 reports the tip sphere of a
+//! [`SimReading::Point`] as the handle's single active marker (valid, or out of volume with a
+//! position only under 0x0800) and `00` (missing) for every other handle, as a real Polaris
+//! answers for passive tools. Option 0x0008 lists a tool's markers in `S`: the marker geometry
+//! given by [`NdiServer::with_tool_markers`] placed by the pose, or the sphere of a point.
+//! Out-of-volume markers (tool markers and strays) are listed only with 0x0800.
 
 use crate::bx::encode_bx;
 use crate::command::{Baud, CommSettings, Command, CommandError, PhsrFilter, TrackingPriority};
 use crate::reply::{
-    HandleReading, HandleStatus, ReplyOptions, StrayMarker, TrackingReply, Transform,
+    ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
+    TrackingReply, Transform,
 };
 use crate::text::{encode_phsr, encode_text_reply, DeviceError, PortHandleStatus};
 use crate::tx::encode_tx;
@@ -47,6 +63,22 @@ pub struct SimFrame {
     /// One reading per tool; index `i` is port handle `i + 1`. Missing entries read as
     /// [`SimReading::Missing`]; extra entries are ignored.
     pub readings: Vec<SimReading>,
+}
+
+/// The simulated characterised measurement volume: an axis-aligned box in `S` (mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasurementVolume {
+    /// The corner with the smallest coordinates (mm).
+    pub min: [f32; 3],
+    /// The corner with the largest coordinates (mm).
+    pub max: [f32; 3],
+}
+
+impl MeasurementVolume {
+    /// Whether `point` (in `S`, mm) is inside the box (faces included).
+    pub fn contains(&self, point: [f32; 3]) -> bool {
+        (0..3).all(|k| self.min[k] <= point[k] && point[k] <= self.max[k])
+    }
 }
 
 /// Where the server gets the current frame when a BX or TX command arrives.
@@ -90,10 +122,16 @@ struct Port {
     enabled: bool,
 }
 
-/// Port status bits: occupied, initialised, enabled.
+/// Port status bits: occupied, initialised, enabled, out of volume, partially out of volume.
 const OCCUPIED: u16 = 0x001;
 const INITIALIZED: u16 = 0x010;
 const ENABLED: u16 = 0x020;
+const OUT_OF_VOLUME: u32 = 0x040;
+const PARTIALLY_OUT_OF_VOLUME: u32 = 0x080;
+/// Tool information of a tool that is not seen (too few markers).
+const TOOL_NOT_SEEN: u8 = 0x02;
+/// Marker information code of a marker used in the transform.
+const MARKER_USED: u8 = 0x3;
 /// Longest command line accepted (PVWR lines are 144 bytes).
 const MAX_COMMAND: usize = 1024;
 /// What VER answers.
@@ -105,6 +143,8 @@ const VERSION: &str =
 pub struct NdiServer<S> {
     source: S,
     ports: Vec<Port>,
+    volume: Option<MeasurementVolume>,
+    tool_markers: Vec<Vec<[f32; 3]>>,
     mode: ServerMode,
     comm: CommSettings,
     line: Vec<u8>,
@@ -118,12 +158,33 @@ impl<S: FrameSource> NdiServer<S> {
         NdiServer {
             source,
             ports: vec![Port::default(); usize::from(tool_count)],
+            volume: None,
+            tool_markers: vec![Vec::new(); usize::from(tool_count)],
             mode: ServerMode::Uninitialized,
             comm: CommSettings::eight_n_one(Baud::B9600),
             line: Vec::new(),
             overlong: false,
             stats: ServerStats::default(),
         }
+    }
+
+    /// Bounds the measurement volume (default: unbounded).
+    pub fn with_volume(mut self, volume: MeasurementVolume) -> Self {
+        self.volume = Some(volume);
+        self
+    }
+
+    /// Gives the tool of port handle `handle` its marker positions in the tool frame (mm), for
+    /// option 0x0008 and the marker information of 0x0002. A handle the device does not have
+    /// is left alone.
+    pub fn with_tool_markers(mut self, handle: u8, markers: Vec<[f32; 3]>) -> Self {
+        if let Some(slot) = usize::from(handle)
+            .checked_sub(1)
+            .and_then(|i| self.tool_markers.get_mut(i))
+        {
+            *slot = markers;
+        }
+        self
     }
 
     /// The current mode.
@@ -257,13 +318,13 @@ impl<S: FrameSource> NdiServer<S> {
         if self.mode != ServerMode::Tracking {
             return Err(DeviceError::WRONG_MODE);
         }
-        let served =
-            ReplyOptions::TRANSFORMS | ReplyOptions::OUT_OF_VOLUME | ReplyOptions::PASSIVE_STRAYS;
-        if options.bits() & !served.bits() != 0 {
-            return Err(DeviceError::BAD_PARAMETERS);
-        }
         let frame = self.source.latest_frame();
-        let reply = build_reply(&self.ports, frame.as_ref(), options, binary);
+        let device = Device {
+            ports: &self.ports,
+            volume: self.volume,
+            tool_markers: &self.tool_markers,
+        };
+        let reply = device.reply(frame.as_ref(), options, binary);
         let encoded = if binary {
             encode_bx(&reply)
         } else {
@@ -342,74 +403,190 @@ fn command_error_code(error: &CommandError) -> DeviceError {
     }
 }
 
-/// The reply for the enabled ports, in handle order.
-fn build_reply(
-    ports: &[Port],
-    frame: Option<&SimFrame>,
-    options: ReplyOptions,
-    binary: bool,
-) -> TrackingReply {
-    let frame_number = frame.map_or(0, |f| f.frame);
-    let reading_of = |i: usize| {
-        frame
-            .and_then(|f| f.readings.get(i))
-            .copied()
-            .unwrap_or(SimReading::Missing)
-    };
-    let handles = ports
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| p.enabled)
-        .map(|(i, p)| {
-            let handle = i as u8 + 1;
-            let transform = match reading_of(i) {
-                SimReading::Missing => None,
-                SimReading::Pose(t) => Some(t),
-                SimReading::Point { position, rms } => Some(Transform {
+/// What the device knows when it builds a reply.
+struct Device<'a> {
+    ports: &'a [Port],
+    volume: Option<MeasurementVolume>,
+    tool_markers: &'a [Vec<[f32; 3]>],
+}
+
+impl Device<'_> {
+    fn inside(&self, point: [f32; 3]) -> bool {
+        self.volume.is_none_or(|v| v.contains(point))
+    }
+
+    /// The reply for the initialised ports, in handle order (see the module documentation).
+    fn reply(&self, frame: Option<&SimFrame>, options: ReplyOptions, binary: bool) -> TrackingReply {
+        let reading_of = |i: usize| {
+            frame
+                .and_then(|f| f.readings.get(i))
+                .copied()
+                .unwrap_or(SimReading::Missing)
+        };
+        let frame_number = frame.map_or(0, |f| f.frame);
+        let handles = self
+            .ports
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.initialized)
+            .map(|(i, port)| {
+                let handle = i as u8 + 1;
+                if port.enabled {
+                    self.handle_reading(handle, port, reading_of(i), frame_number, options, binary)
+                } else {
+                    HandleReading::bare(handle, HandleStatus::Disabled)
+                }
+            })
+            .collect();
+        let all = options.contains(ReplyOptions::OUT_OF_VOLUME);
+        let stray_markers = options.contains(ReplyOptions::PASSIVE_STRAYS).then(|| {
+            (0..self.ports.len())
+                .filter_map(|i| match reading_of(i) {
+                    SimReading::Point { position, .. } => Some(MarkerPosition {
+                        position,
+                        out_of_volume: !self.inside(position),
+                    }),
+                    _ => None,
+                })
+                .filter(|m| all || !m.out_of_volume)
+                .collect()
+        });
+        TrackingReply {
+            options,
+            handles,
+            stray_markers,
+            system_status: 0,
+        }
+    }
+
+    fn handle_reading(
+        &self,
+        handle: u8,
+        port: &Port,
+        reading: SimReading,
+        frame: u32,
+        options: ReplyOptions,
+        binary: bool,
+    ) -> HandleReading {
+        let all = options.contains(ReplyOptions::OUT_OF_VOLUME);
+        let (transform, markers) = match reading {
+            SimReading::Missing => (None, Vec::new()),
+            SimReading::Pose(t) => {
+                let geometry = &self.tool_markers[usize::from(handle) - 1];
+                (Some(t), geometry.iter().map(|p| place(&t, *p)).collect())
+            }
+            SimReading::Point { position, rms } => (
+                Some(Transform {
                     q: [1.0, 0.0, 0.0, 0.0],
                     t: position,
                     rms,
                 }),
-            };
-            let status = if transform.is_some() {
-                HandleStatus::Valid
-            } else {
-                HandleStatus::Missing
-            };
-            if !options.contains(ReplyOptions::TRANSFORMS) {
-                // TX carries no status without option 0x0001; BX still does.
-                let status = if binary {
-                    status
-                } else {
-                    HandleStatus::NotReported
-                };
-                return HandleReading::bare(handle, status);
-            }
-            HandleReading {
-                transform,
-                port_status: Some(u32::from(port_status(p))),
-                frame: Some(frame_number),
-                ..HandleReading::bare(handle, status)
-            }
-        })
-        .collect();
-    let stray_markers = options.contains(ReplyOptions::PASSIVE_STRAYS).then(|| {
-        (0..ports.len())
-            .filter_map(|i| match reading_of(i) {
-                SimReading::Point { position, .. } => Some(StrayMarker {
-                    position: Some(position),
-                    out_of_volume: false,
-                }),
-                _ => None,
+                vec![position],
+            ),
+        };
+        let markers: Vec<MarkerPosition> = markers
+            .into_iter()
+            .map(|position| MarkerPosition {
+                position,
+                out_of_volume: !self.inside(position),
             })
-            .collect()
-    });
-    TrackingReply {
-        options,
-        handles,
-        stray_markers,
-        system_status: 0,
+            .collect();
+        let origin_inside = transform.is_none_or(|t| self.inside(t.t));
+        let seen = transform.is_some() && (origin_inside || all);
+        let mut port_status = u32::from(port_status(port));
+        if transform.is_some() && !origin_inside {
+            port_status |= OUT_OF_VOLUME;
+        } else if markers.iter().any(|m| m.out_of_volume) {
+            port_status |= PARTIALLY_OUT_OF_VOLUME;
+        }
+        let status = if seen {
+            HandleStatus::Valid
+        } else {
+            HandleStatus::Missing
+        };
+        // TX carries no status without option 0x0001; BX still does.
+        let reported = if options.contains(ReplyOptions::TRANSFORMS) || binary {
+            status
+        } else {
+            HandleStatus::NotReported
+        };
+        let mut reading_out = HandleReading::bare(handle, reported);
+        if options.contains(ReplyOptions::TRANSFORMS) {
+            reading_out.transform = transform.filter(|_| seen);
+            reading_out.port_status = Some(port_status);
+            reading_out.frame = Some(frame);
+        }
+        if options.contains(ReplyOptions::TOOL_INFO) {
+            let mut codes = [0u8; 10];
+            if seen {
+                for k in 0..markers.len().min(20) {
+                    codes[9 - k / 2] |= MARKER_USED << (4 * (k % 2));
+                }
+            }
+            reading_out.tool_info = Some(ToolInfo {
+                tool: if seen { 0x00 } else { TOOL_NOT_SEEN },
+                markers: codes,
+            });
+        }
+        if options.contains(ReplyOptions::SINGLE_STRAY) {
+            reading_out.active_marker = Some(match reading {
+                SimReading::Point { position, .. } => {
+                    let status = if self.inside(position) {
+                        ActiveMarker::VALID
+                    } else {
+                        ActiveMarker::VALID | ActiveMarker::OUT_OF_VOLUME
+                    };
+                    ActiveMarker {
+                        status,
+                        position: ActiveMarker::carries_position(status, options)
+                            .then_some(position),
+                    }
+                }
+                _ => ActiveMarker {
+                    status: ActiveMarker::MISSING,
+                    position: None,
+                },
+            });
+        }
+        if options.contains(ReplyOptions::TOOL_MARKERS) {
+            reading_out.tool_markers = Some(
+                markers
+                    .into_iter()
+                    .filter(|m| all || !m.out_of_volume)
+                    .collect(),
+            );
+        }
+        reading_out
     }
+}
+
+/// A tool-frame point placed in `S` by the tool's pose: `R(q)·p + t`.
+fn place(pose: &Transform, p: [f32; 3]) -> [f32; 3] {
+    let [w, x, y, z] = pose.q;
+    let norm = (w * w + x * x + y * y + z * z).sqrt();
+    let (w, x, y, z) = if norm > 0.0 {
+        (w / norm, x / norm, y / norm, z / norm)
+    } else {
+        (1.0, 0.0, 0.0, 0.0)
+    };
+    let r = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    std::array::from_fn(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2] + pose.t[i])
 }
 
 #[cfg(test)]
@@ -542,7 +719,7 @@ mod tests {
         assert_eq!(bx.handle(4).unwrap().port_status, Some(0x31));
         let strays = bx.stray_markers.unwrap();
         assert_eq!(strays.len(), 1);
-        assert_eq!(strays[0].position, Some([4.0, 5.0, -1600.0]));
+        assert_eq!(strays[0].position, [4.0, 5.0, -1600.0]);
 
         let text = ask(&mut s, Command::Tx(ReplyOptions::TRANSFORMS))
             .into_text()
@@ -580,7 +757,7 @@ mod tests {
         assert!(s.feed(&vec![b'A'; 5000]).is_empty());
         assert_eq!(reply(&mut s, b"\r"), "ERROR02");
         start(&mut s);
-        assert_eq!(reply(&mut s, b"BX 0003\r"), "ERROR07");
+        assert_eq!(reply(&mut s, b"BX 0010\r"), "ERROR07");
         assert_eq!(s.stats().errors, 8);
     }
 

@@ -1,21 +1,22 @@
 //! TX: the text tracking reply.
 //!
-//! Handle count (2 hex); per handle: handle (2 hex), then `UNOCCUPIED` + LF, or the data of each
-//! reply option in order — 0x0001: `MISSING`, `DISABLED` or a 51-character transform (q0 qx qy qz
-//! as sign + 5 digits × 1e-4; x y z as sign + 6 digits × 1e-2 mm; rms as sign + 5 digits × 1e-4
-//! mm), then port status (8 hex) and frame number (8 hex); 0x0002: tool info (2 hex) + marker
-//! info (20 hex); 0x0004: marker status (2 hex) and, if it is not 00, a position (3 × sign + 6
-//! digits × 1e-2 mm) — and LF. After the handles, option 0x1000: marker count (2 hex),
-//! out-of-volume bits (⌈n/4⌉ hex digits; the last digit holds markers 0-3, bit j = marker j),
-//! positions (out-of-volume markers only with option 0x0800). Last: system status (4 hex).
-//! A `DISABLED` handle is followed by LF (port status and frame number are accepted if present).
-//! The 0x0004 layout with a marker present is inferred from BX; the real log only shows `00`.
+//! Handle count (2 hex); per handle: handle (2 hex), then `UNOCCUPIED` + LF, `DISABLED` + LF
+//! (with any reply options; port status and frame number are accepted after it when 0x0001 is
+//! requested), or the data of each reply option in order — 0x0001: `MISSING` or a 51-character
+//! transform (q0 qx qy qz as sign + 5 digits × 1e-4; x y z as sign + 6 digits × 1e-2 mm; rms as
+//! sign + 5 digits × 1e-4 mm), then port status (8 hex) and frame number (8 hex); 0x0002: tool
+//! info (2 hex) + marker info (20 hex); 0x0004: marker status (2 hex) and, when
+//! [`ActiveMarker::carries_position`], a position (3 × sign + 6 digits × 1e-2 mm); 0x0008: the
+//! tool's markers as a marker list — and LF. After the handles, option 0x1000: the stray passive
+//! markers as a marker list. Last: system status (4 hex). A marker list is a count (2 hex),
+//! out-of-volume bits (⌈n/4⌉ hex digits; the last digit holds markers 0-3, bit j = marker j)
+//! and a position per marker; out-of-volume markers are listed only with option 0x0800.
 
 use crate::bx::{count_byte, missing};
 use crate::error::{EncodeError, ReplyError};
 use crate::reply::{
-    ActiveMarker, HandleReading, HandleStatus, ReplyOptions, StrayMarker, ToolInfo, TrackingReply,
-    Transform,
+    ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
+    TrackingReply, Transform,
 };
 use crate::text::{encode_text_reply, parse_hex, unexpected};
 use std::fmt::Write as _;
@@ -34,7 +35,7 @@ pub fn parse_tx(text: &str, options: ReplyOptions) -> Result<TrackingReply, Repl
         handles.push(parse_handle(&mut c, options)?);
     }
     let stray_markers = if options.contains(ReplyOptions::PASSIVE_STRAYS) {
-        Some(parse_strays(&mut c, options)?)
+        Some(parse_markers(&mut c, "stray marker")?)
     } else {
         None
     };
@@ -59,18 +60,19 @@ fn parse_handle(c: &mut Text<'_>, options: ReplyOptions) -> Result<HandleReading
         c.lf()?;
         return Ok(HandleReading::bare(handle, HandleStatus::Unoccupied));
     }
+    if c.eat("DISABLED") {
+        let mut reading = HandleReading::bare(handle, HandleStatus::Disabled);
+        if options.contains(ReplyOptions::TRANSFORMS) && c.peek() != Some(b'\n') {
+            reading.port_status = Some(c.hex(8, "port status")?);
+            reading.frame = Some(c.hex(8, "frame number")?);
+        }
+        c.lf()?;
+        return Ok(reading);
+    }
     let mut reading = HandleReading::bare(handle, HandleStatus::NotReported);
     if options.contains(ReplyOptions::TRANSFORMS) {
         if c.eat("MISSING") {
             reading.status = HandleStatus::Missing;
-        } else if c.eat("DISABLED") {
-            reading.status = HandleStatus::Disabled;
-            if c.peek() != Some(b'\n') {
-                reading.port_status = Some(c.hex(8, "port status")?);
-                reading.frame = Some(c.hex(8, "frame number")?);
-            }
-            c.lf()?;
-            return Ok(reading);
         } else if matches!(c.peek(), Some(b'+' | b'-')) {
             reading.status = HandleStatus::Valid;
             reading.transform = Some(Transform {
@@ -102,36 +104,33 @@ fn parse_handle(c: &mut Text<'_>, options: ReplyOptions) -> Result<HandleReading
     }
     if options.contains(ReplyOptions::SINGLE_STRAY) {
         let status = c.hex(2, "active marker status")? as u8;
-        let position = if status != 0 {
+        let position = if ActiveMarker::carries_position(status, options) {
             Some(c.point("active marker position")?)
         } else {
             None
         };
         reading.active_marker = Some(ActiveMarker { status, position });
     }
+    if options.contains(ReplyOptions::TOOL_MARKERS) {
+        reading.tool_markers = Some(parse_markers(c, "tool marker")?);
+    }
     c.lf()?;
     Ok(reading)
 }
 
-fn parse_strays(c: &mut Text<'_>, options: ReplyOptions) -> Result<Vec<StrayMarker>, ReplyError> {
-    let count = c.hex(2, "stray marker count")? as usize;
+/// A marker list: count, out-of-volume digits, positions.
+fn parse_markers(c: &mut Text<'_>, what: &'static str) -> Result<Vec<MarkerPosition>, ReplyError> {
+    let count = c.hex(2, what)? as usize;
     let digits = count.div_ceil(4);
     let mut oov = vec![0u8; digits];
     for digit in &mut oov {
-        *digit = c.hex(1, "stray out-of-volume bits")? as u8;
+        *digit = c.hex(1, "out-of-volume bits")? as u8;
     }
-    let all_positions = options.contains(ReplyOptions::OUT_OF_VOLUME);
     (0..count)
         .map(|i| {
-            let out_of_volume = oov[digits - 1 - i / 4] & (1 << (i % 4)) != 0;
-            let position = if all_positions || !out_of_volume {
-                Some(c.point("stray marker position")?)
-            } else {
-                None
-            };
-            Ok(StrayMarker {
-                position,
-                out_of_volume,
+            Ok(MarkerPosition {
+                out_of_volume: oov[digits - 1 - i / 4] & (1 << (i % 4)) != 0,
+                position: c.point(what)?,
             })
         })
         .collect()
@@ -157,25 +156,7 @@ pub fn encode_tx_text(reply: &TrackingReply) -> Result<String, EncodeError> {
             .stray_markers
             .as_deref()
             .ok_or_else(|| missing(0, ReplyOptions::PASSIVE_STRAYS, "stray markers"))?;
-        let _ = write!(s, "{:02X}", count_byte(strays.len(), "stray markers")?);
-        let digits = strays.len().div_ceil(4);
-        let mut oov = vec![0u8; digits];
-        for (i, marker) in strays.iter().enumerate() {
-            if marker.out_of_volume {
-                oov[digits - 1 - i / 4] |= 1 << (i % 4);
-            }
-        }
-        for digit in oov {
-            let _ = write!(s, "{digit:X}");
-        }
-        for marker in strays {
-            if options.contains(ReplyOptions::OUT_OF_VOLUME) || !marker.out_of_volume {
-                let p = marker.position.ok_or_else(|| {
-                    missing(0, ReplyOptions::PASSIVE_STRAYS, "stray marker position")
-                })?;
-                put_point(&mut s, &p, "stray marker position")?;
-            }
-        }
+        put_markers(&mut s, strays, "stray marker position")?;
     }
     let _ = write!(s, "{:04X}", reply.system_status);
     Ok(s)
@@ -193,18 +174,21 @@ fn encode_handle(
         status: reading.status.name(),
         format: "TX",
     };
-    if reading.status == HandleStatus::Unoccupied {
-        s.push_str("UNOCCUPIED\n");
-        return Ok(());
+    match reading.status {
+        HandleStatus::Unoccupied => {
+            s.push_str("UNOCCUPIED\n");
+            return Ok(());
+        }
+        HandleStatus::Disabled => {
+            s.push_str("DISABLED\n");
+            return Ok(());
+        }
+        _ => {}
     }
     if options.contains(ReplyOptions::TRANSFORMS) {
         let opt = ReplyOptions::TRANSFORMS;
         match reading.status {
             HandleStatus::Missing => s.push_str("MISSING"),
-            HandleStatus::Disabled => {
-                s.push_str("DISABLED\n");
-                return Ok(());
-            }
             HandleStatus::Valid => {
                 let t = reading
                     .transform
@@ -215,7 +199,9 @@ fn encode_handle(
                 put_point(s, &t.t, "position")?;
                 put_signed(s, t.rms, 5, 1e4, "rms")?;
             }
-            HandleStatus::Unoccupied | HandleStatus::NotReported => return Err(bad_status()),
+            HandleStatus::Unoccupied | HandleStatus::Disabled | HandleStatus::NotReported => {
+                return Err(bad_status())
+            }
         }
         let port_status = reading
             .port_status
@@ -240,14 +226,43 @@ fn encode_handle(
             .active_marker
             .ok_or_else(|| missing(handle, opt, "active marker"))?;
         let _ = write!(s, "{:02X}", marker.status);
-        if marker.status != 0 {
+        if ActiveMarker::carries_position(marker.status, options) {
             let p = marker
                 .position
                 .ok_or_else(|| missing(handle, opt, "active marker position"))?;
             put_point(s, &p, "active marker position")?;
         }
     }
+    if options.contains(ReplyOptions::TOOL_MARKERS) {
+        let markers = reading
+            .tool_markers
+            .as_deref()
+            .ok_or_else(|| missing(handle, ReplyOptions::TOOL_MARKERS, "tool markers"))?;
+        put_markers(s, markers, "tool marker position")?;
+    }
     s.push('\n');
+    Ok(())
+}
+
+fn put_markers(
+    s: &mut String,
+    markers: &[MarkerPosition],
+    field: &'static str,
+) -> Result<(), EncodeError> {
+    let _ = write!(s, "{:02X}", count_byte(markers.len(), field)?);
+    let digits = markers.len().div_ceil(4);
+    let mut oov = vec![0u8; digits];
+    for (i, marker) in markers.iter().enumerate() {
+        if marker.out_of_volume {
+            oov[digits - 1 - i / 4] |= 1 << (i % 4);
+        }
+    }
+    for digit in oov {
+        let _ = write!(s, "{digit:X}");
+    }
+    for marker in markers {
+        put_point(s, &marker.position, field)?;
+    }
     Ok(())
 }
 
@@ -426,6 +441,37 @@ mod tests {
             parse_tx("ERROR0D", opts),
             Err(ReplyError::Device(_))
         ));
+    }
+
+    #[test]
+    fn a_marker_status_without_position_and_a_disabled_handle() {
+        // TX:0005 as firmware Rev 021 answers it: handle 2's single active marker is out of
+        // volume (status 05), so no position follows without option 0x0800.
+        let text = "0201MISSING000000310000037700\n02+04985+04691+04244+05926-007836+009627-209044+00509000000310000037605\n0000";
+        let options = ReplyOptions::TRANSFORMS | ReplyOptions::SINGLE_STRAY;
+        let reply = parse_tx(text, options).unwrap();
+        let marker = reply.handle(2).unwrap().active_marker.unwrap();
+        assert_eq!((marker.status, marker.position), (0x05, None));
+        assert_eq!(encode_tx_text(&reply).unwrap(), text);
+        // With 0x0800 the same status carries its position.
+        let all = options | ReplyOptions::OUT_OF_VOLUME;
+        let text = "0101MISSING000000310000037705+012000-000450-250000\n0000";
+        let marker = parse_tx(text, all).unwrap().handles[0].active_marker.unwrap();
+        assert_eq!(marker.position, Some([120.0, -4.5, -2500.0]));
+        // TX:1000 with a disabled handle between two reported ones.
+        let text = "0301\n02DISABLED\n03\n030+015360+030698-223261+015173+022199-225596+007159+026725-2274150000";
+        let reply = parse_tx(text, ReplyOptions::PASSIVE_STRAYS).unwrap();
+        let statuses: Vec<_> = reply.handles.iter().map(|h| h.status).collect();
+        assert_eq!(
+            statuses,
+            [
+                HandleStatus::NotReported,
+                HandleStatus::Disabled,
+                HandleStatus::NotReported
+            ]
+        );
+        assert_eq!(reply.stray_markers.as_ref().unwrap().len(), 3);
+        assert_eq!(encode_tx_text(&reply).unwrap(), text);
     }
 
     #[test]

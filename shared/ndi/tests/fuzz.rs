@@ -1,4 +1,4 @@
-//! Fuzzing (issue 9): arbitrary bytes and mutated real replies into the framer, the parsers and
+//! Fuzzing: arbitrary bytes and mutated real replies into the framer, the parsers and
 //! the simulated device never panic, and every rejection is counted.
 
 mod common;
@@ -9,30 +9,66 @@ use sabr_ndi::bx::parse_bx_body;
 use sabr_ndi::text::{parse_acknowledgement, parse_phsr};
 use sabr_ndi::tx::parse_tx;
 use sabr_ndi::{
-    decode_reply, Command, NdiServer, RawReply, ReadError, ReplyOptions, ReplyReader, SimFrame,
-    SimReading, Transform,
+    decode_reply, Command, MeasurementVolume, NdiServer, RawReply, ReadError, ReplyOptions,
+    ReplyReader, SimFrame, SimReading, Transform,
 };
 use std::sync::OnceLock;
 
-/// Real replies: the fixtures always, plus every reply of the log when it is present.
+/// Real replies: the hand-picked fixtures and every reply of the log.
 fn real_replies() -> &'static [Exchange] {
     static REPLIES: OnceLock<Vec<Exchange>> = OnceLock::new();
     REPLIES.get_or_init(|| {
         let mut all = fixtures();
-        all.extend(log_exchanges("fuzz: mutated real replies").unwrap_or_default());
+        all.extend(log_exchanges());
         all
     })
 }
 
+/// Any combination of the six reply options.
 fn options() -> impl Strategy<Value = ReplyOptions> {
-    (0u16..32).prop_map(|bits| {
-        let mask = [0x0001, 0x0002, 0x0004, 0x0800, 0x1000]
+    (0u16..64).prop_map(|bits| {
+        ReplyOptions::EACH
             .into_iter()
             .enumerate()
             .filter(|(i, _)| bits & (1 << i) != 0)
-            .fold(0, |acc, (_, bit)| acc | bit);
-        ReplyOptions::new(mask).unwrap()
+            .fold(ReplyOptions::new(0).unwrap(), |acc, (_, bit)| acc | bit)
     })
+}
+
+/// BX and TX replies of a simulated device for `options`: four tools with marker geometry in a
+/// bounded volume, one disabled, one point, one pose, one outside the volume.
+fn device_replies(options: ReplyOptions) -> Vec<u8> {
+    let pose = |x: f32| Transform {
+        q: [0.5, 0.5, -0.5, 0.5],
+        t: [x, 10.0, -1500.0],
+        rms: 0.1,
+    };
+    let frame = SimFrame {
+        frame: 300,
+        readings: vec![
+            SimReading::Pose(pose(5.0)),
+            SimReading::Pose(pose(1.0)),
+            SimReading::Point { position: [4.0, 5.0, -1400.0], rms: 0.2 },
+            SimReading::Pose(pose(2500.0)),
+        ],
+    };
+    let volume = MeasurementVolume { min: [-1000.0; 3], max: [1000.0, 1000.0, -500.0] };
+    let mut server = NdiServer::new(4, move || Some(frame.clone())).with_volume(volume);
+    for handle in 1..=4 {
+        server = server.with_tool_markers(handle, vec![[0.0; 3], [40.0, 0.0, 0.0], [0.0, 900.0, 0.0]]);
+    }
+    let mut setup = Command::Init.encode();
+    for handle in 1..=4 {
+        setup.extend(Command::Pinit(handle).encode());
+        if handle != 2 {
+            setup.extend(Command::Pena(handle, sabr_ndi::TrackingPriority::Dynamic).encode());
+        }
+    }
+    setup.extend(Command::Tstart.encode());
+    server.feed(&setup);
+    let mut replies = server.feed(&Command::Bx(options).encode());
+    replies.extend(server.feed(&Command::Tx(options).encode()));
+    replies
 }
 
 /// Reads the whole stream; checks that every error was counted; parses every reply every way.
@@ -153,6 +189,37 @@ proptest! {
                 }
             }
         }
+    }
+
+    #[test]
+    fn mutated_device_replies_of_every_layout_never_panic_and_are_caught(
+        options in options(),
+        mutations in prop::collection::vec(mutation(), 1..4),
+        position in any::<prop::sample::Index>(),
+        mask in 1u8..=255,
+    ) {
+        let original = device_replies(options);
+        // Unmutated, both replies frame and parse with the options they answer.
+        let mut reader = ReplyReader::new(&original[..]);
+        match reader.next() {
+            Some(Ok(RawReply::Binary(body))) => { parse_bx_body(&body, options).unwrap(); }
+            other => panic!("BX reply: {other:?}"),
+        }
+        match reader.next() {
+            Some(Ok(RawReply::Text(text))) => { parse_tx(&text, options).unwrap(); }
+            other => panic!("TX reply: {other:?}"),
+        }
+        let mut bytes = original.clone();
+        for m in &mutations {
+            apply(&mut bytes, m);
+        }
+        read_everything(&bytes, options);
+        // One flipped byte: at most the other reply survives, the flip is counted.
+        let mut flipped = original;
+        let i = position.index(flipped.len());
+        flipped[i] ^= mask;
+        let (good, bad) = read_everything(&flipped, options);
+        prop_assert!(good <= 1 && bad >= 1, "good {}, bad {}", good, bad);
     }
 
     #[test]

@@ -1,10 +1,9 @@
-//! The parser against a real NDI Polaris: every BX and TX reply of the recorded log in
-//! `../shared/ndi/` (skipped with a note when absent), and the fixtures kept in
-//! `tests/fixtures/` (always).
+//! The parser against a real NDI Polaris: every BX and TX reply of the recorded log and the
+//! hand-picked replies, both kept in `tests/fixtures/`.
 
 mod common;
 
-use common::{fixtures, log_exchanges, log_text, parse_bin, parse_txt, Exchange};
+use common::{fixtures, log_exchanges, parse_bin, parse_txt, Exchange, LOG_BIN, LOG_TXT};
 use sabr_ndi::bx::parse_bx_body;
 use sabr_ndi::text::{check_text_reply, parse_phsr};
 use sabr_ndi::tx::parse_tx;
@@ -38,28 +37,17 @@ fn is_bx(exchange: &Exchange) -> bool {
 
 #[test]
 fn bin_and_txt_forms_of_the_log_agree() {
-    let (Some(from_bin), Some(text)) = (
-        log_exchanges("bin_and_txt_forms_of_the_log_agree"),
-        log_text(),
-    ) else {
-        return;
-    };
-    let from_txt = parse_txt(&text).unwrap();
+    let from_bin = log_exchanges();
+    let from_txt = parse_txt(LOG_TXT).unwrap();
     assert_eq!(from_bin.len(), 351, "exchanges 0-350");
     assert_eq!(from_bin, from_txt);
     // The parser of the .bin form itself rejects a cut record.
-    let bytes = std::fs::read(
-        common::log_dir().join("polaris_stream_08_31_2005_NDICommandInterpreter.bin"),
-    )
-    .unwrap();
-    assert!(parse_bin(&bytes[..bytes.len() - 3]).is_err());
+    assert!(parse_bin(&LOG_BIN[..LOG_BIN.len() - 3]).is_err());
 }
 
 #[test]
 fn every_command_and_reply_of_the_log_checks_out() {
-    let Some(exchanges) = log_exchanges("every_command_and_reply_of_the_log_checks_out") else {
-        return;
-    };
+    let exchanges = log_exchanges();
     for exchange in &exchanges {
         let reply = decode_reply(&exchange.reply);
         assert!(reply.is_ok(), "exchange {}: {reply:?}", exchange.seq);
@@ -92,9 +80,7 @@ fn every_command_and_reply_of_the_log_checks_out() {
 
 #[test]
 fn every_bx_and_tx_reply_of_the_log_parses() {
-    let Some(exchanges) = log_exchanges("every_bx_and_tx_reply_of_the_log_parses") else {
-        return;
-    };
+    let exchanges = log_exchanges();
     let replies: Vec<(&Exchange, TrackingReply)> = exchanges
         .iter()
         .filter_map(|e| {
@@ -241,7 +227,7 @@ fn check_stray_markers(replies: &[(&Exchange, TrackingReply)]) {
         assert_eq!(set.len(), 3);
         for (marker, expected) in set.iter().zip(reference) {
             assert!(!marker.out_of_volume);
-            let p = marker.position.unwrap();
+            let p = marker.position;
             for axis in 0..3 {
                 assert!(
                     (p[axis] - expected[axis]).abs() < 0.5,
@@ -310,11 +296,7 @@ fn check_hand_verified(exchange: &Exchange, reply: &TrackingReply) {
 
 #[test]
 fn hand_verified_poses_from_the_log_and_the_fixtures() {
-    let mut sources = vec![("fixtures", fixtures())];
-    if let Some(log) = log_exchanges("hand_verified_poses_from_the_log_and_the_fixtures") {
-        sources.push(("log", log));
-    }
-    for (name, exchanges) in sources {
+    for (name, exchanges) in [("fixtures", fixtures()), ("log", log_exchanges())] {
         let mut checked = 0;
         for exchange in exchanges.iter().filter(|e| [48, 192, 342].contains(&e.seq)) {
             check_hand_verified(exchange, &tracking(exchange).unwrap().unwrap());
@@ -370,9 +352,7 @@ fn corrupted_replies_are_rejected_by_crc() {
     for exchange in fixtures() {
         flipped += assert_every_flip_rejected(exchange.seq, &exchange.reply);
     }
-    let Some(exchanges) = log_exchanges("corrupted_replies_are_rejected_by_crc") else {
-        return;
-    };
+    let exchanges = log_exchanges();
     for exchange in &exchanges {
         flipped += assert_every_flip_rejected(exchange.seq, &exchange.reply);
     }
@@ -401,10 +381,7 @@ fn corrupted_replies_are_rejected_by_crc() {
 
 #[test]
 fn the_whole_received_stream_through_the_reply_reader() {
-    let Some(exchanges) = log_exchanges("the_whole_received_stream_through_the_reply_reader")
-    else {
-        return;
-    };
+    let exchanges = log_exchanges();
     let stream: Vec<u8> = exchanges.iter().flat_map(|e| e.reply.clone()).collect();
     let expected: Vec<RawReply> = exchanges
         .iter()

@@ -1,27 +1,35 @@
 //! Device-side encoding → host-side parsing gives back the same values: BX exactly (f32), TX to
-//! its precision (1e-4 for quaternions and rms, 1e-2 mm for positions).
+//! its precision (1e-4 for quaternions and rms, 1e-2 mm for positions), for every combination of
+//! the six reply options, with valid, MISSING and DISABLED handles in any position.
 
 use proptest::prelude::*;
 use sabr_ndi::bx::{encode_bx, parse_bx_frame};
 use sabr_ndi::tx::{encode_tx, parse_tx};
 use sabr_ndi::{
-    decode_reply, ActiveMarker, HandleReading, HandleStatus, ReplyOptions, StrayMarker, ToolInfo,
+    decode_reply, ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
     TrackingReply, Transform,
 };
 
+/// Any combination of the six reply options.
 fn options() -> impl Strategy<Value = ReplyOptions> {
-    (0u16..32).prop_map(|bits| {
-        let mut mask = 0;
-        for (i, bit) in [0x0001, 0x0002, 0x0004, 0x0800, 0x1000]
+    (0u16..64).prop_map(|bits| {
+        ReplyOptions::EACH
             .into_iter()
             .enumerate()
-        {
-            if bits & (1 << i) != 0 {
-                mask |= bit;
-            }
-        }
-        ReplyOptions::new(mask).unwrap()
+            .filter(|(i, _)| bits & (1 << i) != 0)
+            .fold(ReplyOptions::new(0).unwrap(), |acc, (_, bit)| acc | bit)
     })
+}
+
+/// A marker list of 0 to 20 markers (the most a tool has), some out of volume.
+fn markers() -> impl Strategy<Value = Vec<MarkerPosition>> {
+    prop::collection::vec(
+        (point(), any::<bool>()).prop_map(|(position, out_of_volume)| MarkerPosition {
+            position,
+            out_of_volume,
+        }),
+        0..21,
+    )
 }
 
 fn point() -> impl Strategy<Value = [f32; 3]> {
@@ -46,6 +54,7 @@ struct RawHandle {
     tool_info: ToolInfo,
     marker_status: u8,
     marker_position: [f32; 3],
+    tool_markers: Vec<MarkerPosition>,
 }
 
 fn raw_handle() -> impl Strategy<Value = RawHandle> {
@@ -56,8 +65,14 @@ fn raw_handle() -> impl Strategy<Value = RawHandle> {
         any::<u32>(),
         any::<u8>(),
         any::<[u8; 10]>(),
-        prop_oneof![Just(0u8), any::<u8>()],
+        prop_oneof![
+            Just(ActiveMarker::MISSING),
+            Just(ActiveMarker::VALID),
+            Just(ActiveMarker::VALID | ActiveMarker::OUT_OF_VOLUME),
+            any::<u8>()
+        ],
         point(),
+        markers(),
     )
         .prop_map(
             |(
@@ -69,6 +84,7 @@ fn raw_handle() -> impl Strategy<Value = RawHandle> {
                 markers,
                 marker_status,
                 marker_position,
+                tool_markers,
             )| RawHandle {
                 status,
                 transform,
@@ -77,6 +93,7 @@ fn raw_handle() -> impl Strategy<Value = RawHandle> {
                 tool_info: ToolInfo { tool, markers },
                 marker_status,
                 marker_position,
+                tool_markers,
             },
         )
 }
@@ -84,10 +101,10 @@ fn raw_handle() -> impl Strategy<Value = RawHandle> {
 fn consistent(handle: u8, raw: &RawHandle, options: ReplyOptions, text: bool) -> HandleReading {
     let transforms = options.contains(ReplyOptions::TRANSFORMS);
     let status = match raw.status {
+        2 => HandleStatus::Disabled,
         _ if text && !transforms => HandleStatus::NotReported,
         0 => HandleStatus::Valid,
-        1 => HandleStatus::Missing,
-        _ => HandleStatus::Disabled,
+        _ => HandleStatus::Missing,
     };
     let mut reading = HandleReading::bare(handle, status);
     if status == HandleStatus::Disabled {
@@ -102,11 +119,15 @@ fn consistent(handle: u8, raw: &RawHandle, options: ReplyOptions, text: bool) ->
         reading.tool_info = Some(raw.tool_info);
     }
     if options.contains(ReplyOptions::SINGLE_STRAY) {
-        let position = (raw.marker_status != 0).then_some(raw.marker_position);
+        let position = ActiveMarker::carries_position(raw.marker_status, options)
+            .then_some(raw.marker_position);
         reading.active_marker = Some(ActiveMarker {
             status: raw.marker_status,
             position,
         });
+    }
+    if options.contains(ReplyOptions::TOOL_MARKERS) {
+        reading.tool_markers = Some(raw.tool_markers.clone());
     }
     reading
 }
@@ -115,7 +136,7 @@ fn reply(text: bool) -> impl Strategy<Value = TrackingReply> {
     (
         options(),
         prop::collection::vec(raw_handle(), 0..6),
-        prop::collection::vec((point(), any::<bool>()), 0..20),
+        prop::collection::vec((point(), any::<bool>()), 0..40),
         any::<u16>(),
     )
         .prop_map(move |(options, raw, strays, system_status)| {
@@ -127,13 +148,9 @@ fn reply(text: bool) -> impl Strategy<Value = TrackingReply> {
             let stray_markers = options.contains(ReplyOptions::PASSIVE_STRAYS).then(|| {
                 strays
                     .iter()
-                    .map(|&(p, out_of_volume)| {
-                        let reported =
-                            options.contains(ReplyOptions::OUT_OF_VOLUME) || !out_of_volume;
-                        StrayMarker {
-                            position: reported.then_some(p),
-                            out_of_volume,
-                        }
+                    .map(|&(position, out_of_volume)| MarkerPosition {
+                        position,
+                        out_of_volume,
                     })
                     .collect()
             });
@@ -148,6 +165,14 @@ fn reply(text: bool) -> impl Strategy<Value = TrackingReply> {
 
 fn close(a: &[f32], b: &[f32], tolerance: f32) -> bool {
     a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tolerance)
+}
+
+fn assert_markers_close(parsed: &[MarkerPosition], original: &[MarkerPosition]) {
+    assert_eq!(parsed.len(), original.len());
+    for (a, b) in parsed.iter().zip(original) {
+        assert_eq!(a.out_of_volume, b.out_of_volume);
+        assert!(close(&a.position, &b.position, 1e-2), "{a:?} vs {b:?}");
+    }
 }
 
 /// Parsed TX equals the original up to the format's precision (plus f32 rounding).
@@ -174,18 +199,13 @@ fn assert_tx_close(parsed: &TrackingReply, original: &TrackingReply) {
             }
             (pm, om) => assert_eq!(pm.is_some(), om.is_some()),
         }
+        match (&p.tool_markers, &o.tool_markers) {
+            (Some(pm), Some(om)) => assert_markers_close(pm, om),
+            (pm, om) => assert_eq!(pm.is_some(), om.is_some()),
+        }
     }
     match (&parsed.stray_markers, &original.stray_markers) {
-        (Some(ps), Some(os)) => {
-            assert_eq!(ps.len(), os.len());
-            for (a, b) in ps.iter().zip(os) {
-                assert_eq!(a.out_of_volume, b.out_of_volume);
-                assert_eq!(a.position.is_some(), b.position.is_some());
-                if let (Some(x), Some(y)) = (a.position, b.position) {
-                    assert!(close(&x, &y, 1e-2));
-                }
-            }
-        }
+        (Some(ps), Some(os)) => assert_markers_close(ps, os),
         (ps, os) => assert_eq!(ps.is_some(), os.is_some()),
     }
     assert_eq!(parsed.system_status, original.system_status);

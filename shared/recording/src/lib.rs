@@ -1,4 +1,4 @@
-//! Recording format v1 (robot-model.md §7): a directory with `robot.toml`, `encoders.csv`,
+//! Recording format v1 (docs/robot-model.md §7): a directory with `robot.toml`, `encoders.csv`,
 //! `tracker.csv` and `phases.csv`.
 //!
 //! - [`Recording::read`] reads a whole recording; [`Recording::read_salvage`] reads one cut off

@@ -1,4 +1,4 @@
-//! The rows of a recording and the whole recording in memory (robot-model.md §7).
+//! The rows of a recording and the whole recording in memory (docs/robot-model.md §7).
 
 use std::fmt;
 use std::path::PathBuf;

@@ -2,7 +2,7 @@
 //! (`name:key=value,key=value`, e.g. `ripple:joint=2,harmonic=1,amplitude=0.002,phase=0.3`):
 //! the model's effects, plus two of the simulator's own (`latency`, `thermal`).
 //!
-//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in robot-model.md; the model's
+//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in docs/robot-model.md; the model's
 //! [`Effect`] values inside use its 0-based indices.
 
 use std::fmt;

@@ -1,5 +1,5 @@
 //! The simulated rig: a true robot perturbed from nominal, encoder and tracker emulation,
-//! injectable effects and a session plan like the paper's (robot-model.md, issue 3).
+//! injectable effects and a session plan like the paper's (docs/robot-model.md).
 //!
 //! The parts are independent of how they are driven:
 //! - [`RobotTruth`] / [`TrueRobot`]: motor setpoints → true motor angles, counts, joints and

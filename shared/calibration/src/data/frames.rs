@@ -1,5 +1,5 @@
 //! Tracker frames as measurements in the robot base `Bb`: every tool is taken relative to
-//! the base marker, `T_M_X = T_S_M⁻¹ · T_S_X` (robot-model.md §5, paper eq. 13), then
+//! the base marker, `T_M_X = T_S_M⁻¹ · T_S_X` (docs/robot-model.md §5, paper eq. 13), then
 //! mapped into the robot base with the fixture pose `T_M_Bb`.
 
 use nalgebra::{Isometry3, Point3};

@@ -3,7 +3,7 @@
 //! display as it, and [`EffectSpec`] lets a caller (the simulator) add effects of its own
 //! in the same syntax.
 //!
-//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in robot-model.md; [`Effect`] values
+//! Joints are numbered 1..5 (θ1..θ5) in the syntax, as in docs/robot-model.md; [`Effect`] values
 //! use the model's 0-based indices.
 
 use std::fmt;

@@ -1,4 +1,4 @@
-//! The needle roll of robot-model.md §4: the directions `v ⊥ z_N` from the needle line to the
+//! The needle roll of docs/robot-model.md §4: the directions `v ⊥ z_N` from the needle line to the
 //! back gimbal centre `p_b = p_r + d_offset·v` for which the needle line, `p_b` and the back
 //! gimbal axis `a_b ∥ P·p_b` (`P = diag(0, 1, 1)`) lie in one plane.
 //!

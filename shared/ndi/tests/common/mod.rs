@@ -1,7 +1,5 @@
-//! Test helpers: the real Polaris log (when `../shared/ndi/` is present) and the fixtures.
+//! Test helpers: the real Polaris log and the hand-picked replies, both in `tests/fixtures/`.
 #![allow(dead_code)]
-
-use std::path::PathBuf;
 
 /// One command and the device's reply to it, as recorded.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -23,34 +21,17 @@ impl Exchange {
     }
 }
 
-/// The directory of the real log, relative to the workspace root.
-pub fn log_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/ndi"))
-}
+/// The real log's `.bin` form, kept in `tests/fixtures/` (BSD licence, IGSTK).
+pub const LOG_BIN: &[u8] =
+    include_bytes!("../fixtures/polaris_stream_08_31_2005_NDICommandInterpreter.bin");
 
-const LOG_NAME: &str = "polaris_stream_08_31_2005_NDICommandInterpreter";
+/// The real log's `.txt` form (non-printable bytes escaped, so ASCII).
+pub const LOG_TXT: &str =
+    include_str!("../fixtures/polaris_stream_08_31_2005_NDICommandInterpreter.txt");
 
-/// The log's exchanges read from the `.bin` file, or `None` (with a note) when it is absent.
-pub fn log_exchanges(test: &str) -> Option<Vec<Exchange>> {
-    let path = log_dir().join(format!("{LOG_NAME}.bin"));
-    match std::fs::read(&path) {
-        Ok(bytes) => Some(parse_bin(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()))),
-        Err(e) => {
-            eprintln!(
-                "note: {test}: skipping the real-log part, {} is not readable ({e})",
-                path.display()
-            );
-            None
-        }
-    }
-}
-
-/// The log's `.txt` form, if present.
-pub fn log_text() -> Option<String> {
-    let path = log_dir().join(format!("{LOG_NAME}.txt"));
-    let bytes = std::fs::read(path).ok()?;
-    // Non-printable bytes are escaped, so the text is ASCII.
-    Some(bytes.iter().map(|&b| char::from(b)).collect())
+/// Every exchange of the real log, read from its `.bin` form.
+pub fn log_exchanges() -> Vec<Exchange> {
+    parse_bin(LOG_BIN).unwrap_or_else(|e| panic!("the .bin fixture: {e}"))
 }
 
 /// Records of the `.bin` form: `N. command[len] ` or `N. receive[len] `, `len` raw bytes, LF;

@@ -226,7 +226,7 @@ impl EffectParam {
     }
 }
 
-/// The paper's parameters (robot-model.md §6) plus the tracker latency; the rotation of
+/// The paper's parameters (docs/robot-model.md §6) plus the tracker latency; the rotation of
 /// `T_Bb_Bf` about z is not identifiable apart from θ_off,1 and θ_off,2 and stays out.
 pub fn paper_layout() -> ParamLayout<ParamId> {
     let mut ids = vec![ParamId::Latency];
