@@ -41,7 +41,9 @@ pub fn bin(name: &str) -> PathBuf {
 pub fn run_alone() -> std::sync::MutexGuard<'static, ()> {
     static ALONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
     // A test that panicked while holding the guard leaves nothing to repair.
-    ALONE.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    ALONE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// A fresh domain for one test: `it-<test>-<pid>`.

@@ -17,16 +17,17 @@ use std::process::Command;
 /// The workspace this `sabr` was compiled from (the parent of the `launch` package).
 fn workspace_root() -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent()?;
-    root.join("Cargo.toml").is_file().then(|| root.to_path_buf())
+    root.join("Cargo.toml")
+        .is_file()
+        .then(|| root.to_path_buf())
 }
 
 /// True when cargo itself started this process as the `sabr` package (`cargo run`): cargo
 /// sets `CARGO_MANIFEST_DIR` to the running package's directory. Other packages' tests that
 /// start a launcher see their own directory there.
 fn started_by_cargo_run() -> bool {
-    std::env::var_os("CARGO_MANIFEST_DIR").is_some_and(|dir| {
-        Path::new(&dir) == Path::new(env!("CARGO_MANIFEST_DIR"))
-    })
+    std::env::var_os("CARGO_MANIFEST_DIR")
+        .is_some_and(|dir| Path::new(&dir) == Path::new(env!("CARGO_MANIFEST_DIR")))
 }
 
 /// The bare executable names (no `/`) of the `[[node]]` entries of a launch file; nothing when
@@ -162,7 +163,10 @@ mod tests {
         .unwrap();
         assert_eq!(bare_executables(&file), ["sabr-rig", "sabr-sync"]);
         std::fs::write(&file, "[[node]\n").unwrap();
-        assert!(bare_executables(&file).is_empty(), "bad TOML: loading says why");
+        assert!(
+            bare_executables(&file).is_empty(),
+            "bad TOML: loading says why"
+        );
     }
 
     #[test]

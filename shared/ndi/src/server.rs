@@ -416,7 +416,12 @@ impl Device<'_> {
     }
 
     /// The reply for the initialised ports, in handle order (see the module documentation).
-    fn reply(&self, frame: Option<&SimFrame>, options: ReplyOptions, binary: bool) -> TrackingReply {
+    fn reply(
+        &self,
+        frame: Option<&SimFrame>,
+        options: ReplyOptions,
+        binary: bool,
+    ) -> TrackingReply {
         let reading_of = |i: usize| {
             frame
                 .and_then(|f| f.readings.get(i))

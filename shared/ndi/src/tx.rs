@@ -456,7 +456,9 @@ mod tests {
         // With 0x0800 the same status carries its position.
         let all = options | ReplyOptions::OUT_OF_VOLUME;
         let text = "0101MISSING000000310000037705+012000-000450-250000\n0000";
-        let marker = parse_tx(text, all).unwrap().handles[0].active_marker.unwrap();
+        let marker = parse_tx(text, all).unwrap().handles[0]
+            .active_marker
+            .unwrap();
         assert_eq!(marker.position, Some([120.0, -4.5, -2500.0]));
         // TX:1000 with a disabled handle between two reported ones.
         let text = "0301\n02DISABLED\n03\n030+015360+030698-223261+015173+022199-225596+007159+026725-2274150000";

@@ -48,14 +48,21 @@ fn device_replies(options: ReplyOptions) -> Vec<u8> {
         readings: vec![
             SimReading::Pose(pose(5.0)),
             SimReading::Pose(pose(1.0)),
-            SimReading::Point { position: [4.0, 5.0, -1400.0], rms: 0.2 },
+            SimReading::Point {
+                position: [4.0, 5.0, -1400.0],
+                rms: 0.2,
+            },
             SimReading::Pose(pose(2500.0)),
         ],
     };
-    let volume = MeasurementVolume { min: [-1000.0; 3], max: [1000.0, 1000.0, -500.0] };
+    let volume = MeasurementVolume {
+        min: [-1000.0; 3],
+        max: [1000.0, 1000.0, -500.0],
+    };
     let mut server = NdiServer::new(4, move || Some(frame.clone())).with_volume(volume);
     for handle in 1..=4 {
-        server = server.with_tool_markers(handle, vec![[0.0; 3], [40.0, 0.0, 0.0], [0.0, 900.0, 0.0]]);
+        server =
+            server.with_tool_markers(handle, vec![[0.0; 3], [40.0, 0.0, 0.0], [0.0, 900.0, 0.0]]);
     }
     let mut setup = Command::Init.encode();
     for handle in 1..=4 {

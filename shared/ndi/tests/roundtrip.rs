@@ -6,8 +6,8 @@ use proptest::prelude::*;
 use sabr_ndi::bx::{encode_bx, parse_bx_frame};
 use sabr_ndi::tx::{encode_tx, parse_tx};
 use sabr_ndi::{
-    decode_reply, ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
-    TrackingReply, Transform,
+    decode_reply, ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions,
+    ToolInfo, TrackingReply, Transform,
 };
 
 /// Any combination of the six reply options.

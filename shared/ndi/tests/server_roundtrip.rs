@@ -21,19 +21,27 @@ const VOLUME: MeasurementVolume = MeasurementVolume {
 fn geometry(handle: u8) -> Vec<[f32; 3]> {
     let s = 20.0 * f32::from(handle);
     let mut markers = vec![[0.0, 0.0, 0.0], [s, 0.0, 0.0], [0.0, s, 10.0]];
-    if handle % 2 == 0 {
+    if handle.is_multiple_of(2) {
         markers.push([-s, 5.0, 0.0]);
     }
     markers
 }
 
 fn reading() -> impl Strategy<Value = SimReading> {
-    let position = (-1500.0f32..1500.0, -1500.0f32..1500.0, -3000.0f32..0.0)
-        .prop_map(|(x, y, z)| [x, y, z]);
+    let position =
+        (-1500.0f32..1500.0, -1500.0f32..1500.0, -3000.0f32..0.0).prop_map(|(x, y, z)| [x, y, z]);
     prop_oneof![
         Just(SimReading::Missing),
-        (prop::array::uniform4(-1.0f32..1.0), position.clone(), 0.0f32..2.0)
-            .prop_filter("a rotation", |(q, _, _)| q.iter().map(|v| v * v).sum::<f32>() > 0.01)
+        (
+            prop::array::uniform4(-1.0f32..1.0),
+            position.clone(),
+            0.0f32..2.0
+        )
+            .prop_filter("a rotation", |(q, _, _)| q
+                .iter()
+                .map(|v| v * v)
+                .sum::<f32>()
+                > 0.01)
             .prop_map(|(q, t, rms)| SimReading::Pose(Transform { q, t, rms })),
         (position, 0.0f32..2.0).prop_map(|(position, rms)| SimReading::Point { position, rms }),
     ]
@@ -101,26 +109,45 @@ fn check_handle(h: &HandleReading, reading: &SimReading, enabled: bool, options:
         SimReading::Missing => (None, vec![]),
         SimReading::Pose(t) => (
             Some(t),
-            geometry(h.handle).into_iter().map(|p| placed(t.q, t.t, p)).collect(),
+            geometry(h.handle)
+                .into_iter()
+                .map(|p| placed(t.q, t.t, p))
+                .collect(),
         ),
         SimReading::Point { position, rms } => (
-            Some(Transform { q: [1.0, 0.0, 0.0, 0.0], t: position, rms }),
+            Some(Transform {
+                q: [1.0, 0.0, 0.0, 0.0],
+                t: position,
+                rms,
+            }),
             vec![position],
         ),
     };
     let inside = pose.is_none_or(|t| VOLUME.contains(t.t));
     let seen = pose.is_some() && (inside || all);
-    assert_eq!(h.status == HandleStatus::Valid, seen, "{h:?} for {reading:?}");
+    assert_eq!(
+        h.status == HandleStatus::Valid,
+        seen,
+        "{h:?} for {reading:?}"
+    );
     if options.contains(ReplyOptions::TRANSFORMS) {
         assert_eq!(h.transform, pose.filter(|_| seen));
         let port = h.port_status.unwrap();
         assert_eq!(port & 0x31, 0x31, "occupied, initialised, enabled");
-        assert_eq!(port & 0x40 != 0, pose.is_some() && !inside, "out of volume bit");
+        assert_eq!(
+            port & 0x40 != 0,
+            pose.is_some() && !inside,
+            "out of volume bit"
+        );
     }
     if options.contains(ReplyOptions::TOOL_INFO) {
         let info = h.tool_info.unwrap();
         assert_eq!(info.tool, if seen { 0x00 } else { 0x02 });
-        let used: u32 = info.markers.iter().map(|b| (b & 0x0F == 3) as u32 + (b >> 4 == 3) as u32).sum();
+        let used: u32 = info
+            .markers
+            .iter()
+            .map(|b| (b & 0x0F == 3) as u32 + (b >> 4 == 3) as u32)
+            .sum();
         assert_eq!(used as usize, if seen { markers.len() } else { 0 });
     }
     if options.contains(ReplyOptions::SINGLE_STRAY) {
@@ -132,12 +159,20 @@ fn check_handle(h: &HandleReading, reading: &SimReading, enabled: bool, options:
                 assert_eq!(marker.status & ActiveMarker::OUT_OF_VOLUME != 0, !in_volume);
                 assert_eq!(marker.position, (in_volume || all).then_some(position));
             }
-            _ => assert_eq!(marker, ActiveMarker { status: ActiveMarker::MISSING, position: None }),
+            _ => assert_eq!(
+                marker,
+                ActiveMarker {
+                    status: ActiveMarker::MISSING,
+                    position: None
+                }
+            ),
         }
     }
     if options.contains(ReplyOptions::TOOL_MARKERS) {
-        let expected: Vec<[f32; 3]> =
-            markers.into_iter().filter(|&p| all || VOLUME.contains(p)).collect();
+        let expected: Vec<[f32; 3]> = markers
+            .into_iter()
+            .filter(|&p| all || VOLUME.contains(p))
+            .collect();
         let got = h.tool_markers.as_ref().unwrap();
         assert_eq!(got.len(), expected.len(), "{got:?} vs {expected:?}");
         for (m, p) in got.iter().zip(&expected) {
@@ -157,12 +192,18 @@ fn assert_tx_matches_bx(tx: &TrackingReply, bx: &TrackingReply) {
         } else {
             assert_eq!(t.status, HandleStatus::NotReported, "TX carries no status");
         }
-        assert_eq!((t.port_status, t.frame, t.tool_info), (b.port_status, b.frame, b.tool_info));
+        assert_eq!(
+            (t.port_status, t.frame, t.tool_info),
+            (b.port_status, b.frame, b.tool_info)
+        );
         assert_eq!(t.transform.is_some(), b.transform.is_some());
         if let (Some(tt), Some(bt)) = (t.transform, b.transform) {
             assert!(near(tt.t, bt.t, 1e-2) && (tt.rms - bt.rms).abs() <= 1e-4);
         }
-        assert_eq!(t.active_marker.map(|m| m.status), b.active_marker.map(|m| m.status));
+        assert_eq!(
+            t.active_marker.map(|m| m.status),
+            b.active_marker.map(|m| m.status)
+        );
         let markers = |r: &HandleReading| r.tool_markers.clone().unwrap_or_default();
         assert_marker_lists(&markers(t), &markers(b));
     }
