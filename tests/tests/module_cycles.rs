@@ -150,7 +150,12 @@ fn group_heads(text: &str) -> Vec<String> {
                     break;
                 }
             }
-            ',' if depth == 1 => expecting = true,
+            ',' if depth == 1 => {
+                if !current.is_empty() {
+                    heads.push(std::mem::take(&mut current));
+                }
+                expecting = true;
+            }
             c if depth == 1 && expecting && is_ident(c) => current.push(c),
             _ if depth == 1 && expecting && !current.is_empty() => {
                 heads.push(std::mem::take(&mut current));

@@ -14,12 +14,12 @@
 
 use crate::bx::parse_bx_body;
 use crate::command::{Baud, CommSettings, Command, PhsrFilter, TrackingPriority};
+use crate::error::DeviceError;
 use crate::error::ReplyError;
 use crate::framing::{FramerStats, RawReply, ReplyFramer};
 use crate::reply::{ReplyOptions, TrackingReply};
 use crate::text::{
-    parse_acknowledgement, parse_phsr, reject_device_error, Acknowledgement, DeviceError,
-    PortHandleStatus,
+    parse_acknowledgement, parse_phsr, reject_device_error, Acknowledgement, PortHandleStatus,
 };
 use serialport::{ClearBuffer, SerialPort};
 use std::io::{ErrorKind, Write};

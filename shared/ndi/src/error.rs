@@ -1,6 +1,6 @@
 //! Errors of reply parsing and encoding.
 
-use crate::text::DeviceError;
+use std::fmt;
 use thiserror::Error;
 
 /// Why a reply (or a stretch of the byte stream) was rejected.
@@ -172,4 +172,68 @@ pub enum EncodeError {
     /// A BX body longer than its 16-bit length field.
     #[error("BX body of {0} bytes exceeds 65535")]
     TooLong(usize),
+}
+
+/// An `ERRORxx` reply: the device refused the command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeviceError {
+    /// The error code (the two hex digits after `ERROR`).
+    pub code: u8,
+}
+
+impl DeviceError {
+    /// 0x01: the device does not know the command.
+    pub const INVALID_COMMAND: DeviceError = DeviceError { code: 0x01 };
+    /// 0x02: the command line is too long.
+    pub const TOO_LONG: DeviceError = DeviceError { code: 0x02 };
+    /// 0x03: the command line is too short.
+    pub const TOO_SHORT: DeviceError = DeviceError { code: 0x03 };
+    /// 0x04: the command's CRC is wrong.
+    pub const BAD_CRC: DeviceError = DeviceError { code: 0x04 };
+    /// 0x06: the COMM parameters are out of range.
+    pub const BAD_COMM: DeviceError = DeviceError { code: 0x06 };
+    /// 0x07: wrong number or form of parameters.
+    pub const BAD_PARAMETERS: DeviceError = DeviceError { code: 0x07 };
+    /// 0x08: no such port handle.
+    pub const INVALID_HANDLE: DeviceError = DeviceError { code: 0x08 };
+    /// 0x09: invalid tracking priority.
+    pub const INVALID_PRIORITY: DeviceError = DeviceError { code: 0x09 };
+    /// 0x0C: the command is not allowed in the current mode (setup / tracking).
+    pub const WRONG_MODE: DeviceError = DeviceError { code: 0x0C };
+    /// 0x0E: the port handle is not initialised.
+    pub const NOT_INITIALIZED: DeviceError = DeviceError { code: 0x0E };
+    /// 0x10: the system is not initialised (INIT first).
+    pub const SYSTEM_NOT_INITIALIZED: DeviceError = DeviceError { code: 0x10 };
+
+    /// What the code means (NDI Combined API error table).
+    pub fn description(self) -> &'static str {
+        match self.code {
+            0x01 => "invalid command",
+            0x02 => "command too long",
+            0x03 => "command too short",
+            0x04 => "invalid CRC calculated for command",
+            0x05 => "time-out on command execution",
+            0x06 => "unable to set up new communication parameters",
+            0x07 => "incorrect number of parameters",
+            0x08 => "invalid port handle selected",
+            0x09 => "invalid tracking priority selected",
+            0x0A => "invalid LED selected",
+            0x0B => "invalid LED state selected",
+            0x0C => "command is invalid while in the current mode",
+            0x0D => "no tool is assigned to the selected port handle",
+            0x0E => "selected port handle not initialized",
+            0x0F => "selected port handle not enabled",
+            0x10 => "system not initialized",
+            0x11 => "unable to stop tracking",
+            0x12 => "unable to start tracking",
+            0x13 => "unable to initialize the port handle",
+            _ => "see the NDI API guide",
+        }
+    }
+}
+
+impl fmt::Display for DeviceError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "ERROR{:02X} ({})", self.code, self.description())
+    }
 }

@@ -33,7 +33,7 @@ pub use command::{
 };
 pub use crc::crc16;
 pub use driver::{CommandWarning, DriverConfig, DriverError, DriverStats, NdiDriver, Stamped};
-pub use error::{EncodeError, ReplyError};
+pub use error::{DeviceError, EncodeError, ReplyError};
 pub use framing::{decode_reply, FramerStats, RawReply, ReadError, ReplyFramer, ReplyReader};
 pub use pty::{Pty, PtyError, ServeStats};
 pub use reply::{
@@ -43,4 +43,4 @@ pub use reply::{
 pub use server::{
     FrameSource, MeasurementVolume, NdiServer, ServerMode, ServerStats, SimFrame, SimReading,
 };
-pub use text::{Acknowledgement, DeviceError, PortHandleStatus};
+pub use text::{Acknowledgement, PortHandleStatus};

@@ -32,11 +32,12 @@
 
 use crate::bx::encode_bx;
 use crate::command::{Baud, CommSettings, Command, CommandError, PhsrFilter, TrackingPriority};
+use crate::error::DeviceError;
 use crate::reply::{
     ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,
     TrackingReply, Transform,
 };
-use crate::text::{encode_phsr, encode_text_reply, DeviceError, PortHandleStatus};
+use crate::text::{encode_phsr, encode_text_reply, PortHandleStatus};
 use crate::tx::encode_tx;
 
 /// One simulated tool's measurement in one frame, in the tracker frame `S`.

@@ -36,6 +36,9 @@
 mod deadline;
 mod domain;
 pub mod doorbell;
+mod doorbell_rpc;
+mod events;
+mod message;
 mod observer;
 mod ports;
 mod runtime;
@@ -45,14 +48,16 @@ mod transport;
 pub use deadline::Deadline;
 pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
 pub use doorbell::Doorbell;
+pub use doorbell_rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
+pub use message::Message;
 pub use observer::{domain_files, release_domain, GraphObserver};
-pub use ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
+pub use ports::{Client, Publisher, Server, Subscriber};
 pub use runtime::{
     run_dir, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD, NODE_NAME_ENV,
     RUN_DIR_ENV,
 };
 pub use time::monotonic_ns;
-pub use transport::Transport;
+pub use transport::{Transport, Waitable};
 
 /// The iceoryx2 crate this runtime is built on, for direct use of what the helpers lack.
 pub use iceoryx2;

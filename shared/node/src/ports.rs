@@ -1,16 +1,12 @@
 //! Typed publish-subscribe ports that wake waiting subscribers through their transport (a
 //! paired event per service, or the consumers' doorbells).
 
-use crate::transport::Transport;
+use crate::message::Message;
+use crate::transport::{Transport, Waitable};
 use crate::NodeError;
-use iceoryx2::prelude::{ipc, ZeroCopySend};
+use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::publish_subscribe;
-use std::fmt::Debug;
 use std::time::{Duration, Instant};
-
-/// What a message type must be to travel through the graph: every `sabr_msgs` type is one.
-pub trait Message: Debug + ZeroCopySend + Copy + 'static {}
-impl<T: Debug + ZeroCopySend + Copy + 'static> Message for T {}
 
 /// The raw iceoryx2 client of a request-response service.
 pub type Client<Req, Resp, S = ipc::Service> = iceoryx2::port::client::Client<S, Req, (), Resp, ()>;
@@ -124,20 +120,6 @@ impl<T: Message, S: Transport> Subscriber<T, S> {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
-    }
-}
-
-/// An input of a main loop ([`crate::NodeRuntime::run_on_data`]): a subscriber of any message
-/// type (or, on the doorbell transport, a server), for waiting on several at once.
-pub trait Waitable<S: Transport = ipc::Service> {
-    /// How the input is woken: its event listener, or its event id of the doorbell.
-    #[doc(hidden)]
-    #[allow(private_interfaces)]
-    fn wake_listener(&self) -> &S::Inbox;
-    /// Clears pending wake-ups after a wake (the data stays readable).
-    #[doc(hidden)]
-    fn clear(&self) {
-        S::clear_inbox(self.wake_listener());
     }
 }
 

@@ -1,12 +1,14 @@
 //! [`NodeRuntime`]: the iceoryx2 node of one process, its lifecycle and its main loops.
 
-use crate::ports::{Client, Message, Publisher, Server, Subscriber, Waitable};
-use crate::transport::Transport;
+use crate::events::{listener_on, notifier_on, service_name};
+use crate::message::Message;
+use crate::ports::{Client, Publisher, Server, Subscriber};
+use crate::transport::{Transport, Waitable};
 use crate::{monotonic_ns, Domain, NodeError};
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::{ipc, NodeBuilder, NodeName, ServiceName};
+use iceoryx2::prelude::{ipc, NodeBuilder, NodeName};
 use iceoryx2_bb_posix::signal::SignalHandler;
 use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
 use std::path::PathBuf;
@@ -501,38 +503,6 @@ pub(crate) fn lifecycle_service<S: Transport>(
         .history_size(0)
         .open_or_create()
         .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "open service", e))
-}
-
-/// A notifier on the event service named `service` (stock transport).
-pub(crate) fn notifier_on(
-    node: &Node<ipc::Service>,
-    service: &str,
-) -> Result<Notifier<ipc::Service>, NodeError> {
-    node.service_builder(&service_name(service)?)
-        .event()
-        .open_or_create()
-        .map_err(|e| NodeError::port(service, "open event service", e))?
-        .notifier_builder()
-        .create()
-        .map_err(|e| NodeError::port(service, "create notifier", e))
-}
-
-/// A listener on the event service named `service` (stock transport).
-pub(crate) fn listener_on(
-    node: &Node<ipc::Service>,
-    service: &str,
-) -> Result<Listener<ipc::Service>, NodeError> {
-    node.service_builder(&service_name(service)?)
-        .event()
-        .open_or_create()
-        .map_err(|e| NodeError::port(service, "open event service", e))?
-        .listener_builder()
-        .create()
-        .map_err(|e| NodeError::port(service, "create listener", e))
-}
-
-pub(crate) fn service_name(service: &str) -> Result<ServiceName, NodeError> {
-    ServiceName::new(service).map_err(|e| NodeError::port(service, "parse service name", e))
 }
 
 /// Checks a node name: 1..=32 bytes of ASCII letters, digits, `-` or `_` (it names log files).

@@ -8,7 +8,8 @@
 //!   doorbells with the consumer port's event id (see [`crate::doorbell`]).
 
 use crate::doorbell::{Bell, Doorbell, Inbox, Ringer};
-use crate::ports::{Message, Waitable};
+use crate::events::{listener_on, notifier_on};
+use crate::message::Message;
 use crate::NodeError;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
@@ -28,6 +29,20 @@ pub trait Transport: sealed::Sealed {}
 
 impl Transport for ipc::Service {}
 impl Transport for Doorbell {}
+
+/// An input of a main loop ([`crate::NodeRuntime::run_on_data`]): a subscriber of any message
+/// type (or, on the doorbell transport, a server), for waiting on several at once.
+pub trait Waitable<S: Transport = ipc::Service> {
+    /// How the input is woken: its event listener, or its event id of the doorbell.
+    #[doc(hidden)]
+    #[allow(private_interfaces)]
+    fn wake_listener(&self) -> &S::Inbox;
+    /// Clears pending wake-ups after a wake (the data stays readable).
+    #[doc(hidden)]
+    fn clear(&self) {
+        S::clear_inbox(self.wake_listener());
+    }
+}
 
 pub(crate) mod sealed {
     use super::*;
@@ -100,7 +115,7 @@ impl sealed::Sealed for ipc::Service {
     }
 
     fn inbox(node: &Node<Self>, _inbound: &(), service: &str) -> Result<Self::Inbox, NodeError> {
-        crate::runtime::listener_on(node, service)
+        listener_on(node, service)
     }
 
     fn port_name(_inbox: &Self::Inbox) -> Option<&PortName> {
@@ -108,7 +123,7 @@ impl sealed::Sealed for ipc::Service {
     }
 
     fn wake(node: &Rc<Node<Self>>, service: &str) -> Result<Self::Wake, NodeError> {
-        crate::runtime::notifier_on(node, service)
+        notifier_on(node, service)
     }
 
     fn wake_subscribers<T: Message>(

@@ -49,6 +49,13 @@ impl EncoderTrack {
     /// Counts (fractional) at host time `t_ns`; `None` outside the stream or inside a gap
     /// longer than the allowed one.
     pub fn counts_at(&self, t_ns: f64) -> Option<[f64; 5]> {
+        self.counts_bridging(t_ns, self.max_gap_ns)
+    }
+
+    /// Counts (fractional) at host time `t_ns`, interpolated across gaps up to `max_gap_ns`
+    /// (ns) instead of the track's own limit: for coarse, model-free uses that tolerate the
+    /// interpolation error of a longer gap; `None` outside the stream or inside a longer gap.
+    pub fn counts_bridging(&self, t_ns: f64, max_gap_ns: i64) -> Option<[f64; 5]> {
         let i = self.times_ns.partition_point(|&t| (t as f64) <= t_ns);
         if i == 0 || i > self.times_ns.len() {
             return None;
@@ -59,7 +66,7 @@ impl EncoderTrack {
                 .then(|| self.counts[last].map(|c| c as f64));
         }
         let (t0, t1) = (self.times_ns[i - 1], self.times_ns[i]);
-        if t1 - t0 > self.max_gap_ns {
+        if t1 - t0 > max_gap_ns {
             return None;
         }
         let f = (t_ns - t0 as f64) / (t1 - t0) as f64;
@@ -106,6 +113,9 @@ mod tests {
         let c = track.counts_at(1_500_000.0).unwrap();
         assert!((c[0] - 15.0).abs() < 1e-12 && (c[4] + 1.5).abs() < 1e-12);
         assert!(track.counts_at(5_000_000.0).is_none(), "inside an 8 ms gap");
+        let bridged = track.counts_bridging(6_000_000.0, 10_000_000).unwrap();
+        assert!((bridged[0] - 25.0).abs() < 1e-12, "halfway from 20 to 30");
+        assert!(track.counts_bridging(6_000_000.0, 7_999_999).is_none());
         assert!(track.counts_at(-1.0).is_none());
         let rate = track.rate_at(1_000_000.0, 500_000.0).unwrap();
         assert!((rate[0] - 10_000.0).abs() < 1e-6);

@@ -26,6 +26,12 @@ const MIN_FRAMES: usize = 50;
 const FEATURES: usize = 21;
 /// Outputs: front and back marker position and rotation.
 const OUTPUTS: usize = 12;
+/// Longest encoder gap (ns) the search interpolates across. A frame takes part only if the
+/// encoder stream covers it at every searched delay (a 350 ms window), and a live encoder
+/// stream on a loaded 2-core machine misses a period or several every few hundred ms: with
+/// the fit's own limit (a few ms) most frames would drop out. A quadratic regression over a
+/// whole phase is insensitive to the interpolation error across a gap this long.
+const SEARCH_MAX_GAP_NS: i64 = 25_000_000;
 
 /// Result of the model-free latency search.
 #[derive(Debug, Clone, PartialEq)]
@@ -47,9 +53,11 @@ pub fn estimate(data: &SessionData) -> Result<LatencyEstimate, CalibrationError>
             f.front.is_some()
                 && f.back.is_some()
                 && data.phases.at(data.exposure_ns(i, 0.05)) == Phase::Excitation
-                && coarse
-                    .iter()
-                    .all(|d| data.encoders.counts_at(data.exposure_ns(i, *d)).is_some())
+                && coarse.iter().all(|d| {
+                    data.encoders
+                        .counts_bridging(data.exposure_ns(i, *d), SEARCH_MAX_GAP_NS)
+                        .is_some()
+                })
         })
         .collect();
     if selected.len() < MIN_FRAMES {
@@ -149,7 +157,10 @@ fn marker_outputs(data: &SessionData, selected: &[usize]) -> DMatrix<f64> {
 fn count_scaling(data: &SessionData, selected: &[usize]) -> [(f64, f64); 5] {
     let counts: Vec<[f64; 5]> = selected
         .iter()
-        .filter_map(|&i| data.encoders.counts_at(data.exposure_ns(i, 0.0)))
+        .filter_map(|&i| {
+            data.encoders
+                .counts_bridging(data.exposure_ns(i, 0.0), SEARCH_MAX_GAP_NS)
+        })
         .collect();
     std::array::from_fn(|j| {
         let n = counts.len().max(1) as f64;
@@ -172,7 +183,10 @@ fn regression_rss(
     let mut xty = DMatrix::<f64>::zeros(FEATURES, OUTPUTS);
     let mut features = [0.0; FEATURES];
     for (row, &i) in selected.iter().enumerate() {
-        let Some(counts) = data.encoders.counts_at(data.exposure_ns(i, d)) else {
+        let Some(counts) = data
+            .encoders
+            .counts_bridging(data.exposure_ns(i, d), SEARCH_MAX_GAP_NS)
+        else {
             return f64::INFINITY;
         };
         let z: [f64; 5] = std::array::from_fn(|j| (counts[j] - scaling[j].0) / scaling[j].1);

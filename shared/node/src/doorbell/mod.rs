@@ -24,10 +24,8 @@
 
 mod bell;
 mod futex;
-mod rpc;
 
 pub(crate) use bell::{Bell, Inbox, Ringer};
-pub use rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
 
 use core::fmt::Debug;
 use iceoryx2::prelude::ZeroCopySend;

@@ -2,9 +2,10 @@
 //! each request and sleeps on its own doorbell for the answer; a server rings the doorbell of
 //! the client each response goes to.
 
-use super::{Doorbell, Inbox, Ringer};
-use crate::ports::{Message, Waitable};
-use crate::runtime::service_name;
+use crate::doorbell::{Doorbell, Inbox, Ringer};
+use crate::events::service_name;
+use crate::message::Message;
+use crate::transport::Waitable;
 use crate::{NodeError, NodeRuntime};
 use iceoryx2::pending_response::PendingResponse;
 use iceoryx2::prelude::{CallbackProgression, PortFactory};
