@@ -1,7 +1,7 @@
 //! The live streams turned into recording rows (docs/robot-model.md §7) and written as they come.
 
-use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
 use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
+use sabr_recording::live::{encoder_row, phase_row, tracker_rows};
 use sabr_recording::{FlushPolicy, RecordingError, RecordingWriter};
 use std::path::Path;
 

@@ -14,7 +14,6 @@
 mod fixed_string;
 mod graph;
 mod motion;
-pub mod rows;
 mod sensing;
 pub mod services;
 

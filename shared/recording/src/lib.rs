@@ -16,6 +16,8 @@
 mod encoders;
 mod error;
 mod format;
+#[cfg(feature = "live")]
+pub mod live;
 mod phases;
 pub mod poses;
 mod reader;

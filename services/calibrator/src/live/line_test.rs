@@ -23,7 +23,7 @@ use sabr_msgs::{MotionState, MotionStatus, MotorSetpoint, PhaseMark, RigTruth, T
 use serde::Serialize;
 use std::time::{Duration, Instant};
 
-use sabr_msgs::rows::tracker_rows;
+use sabr_recording::live::tracker_rows;
 
 /// Longest hold averaged at each end of the line (ns).
 const MAX_HOLD_NS: i64 = 500_000_000;

@@ -7,7 +7,7 @@
 //! and re-interpolates the encoders at every latency it tries; a matched sample is frozen at
 //! `sync`'s latency and cannot be re-matched. So the calibrator subscribes to exactly what the
 //! recorder writes — encoder samples, tracker frames and phase marks — and keeps them as the
-//! same recording rows ([`sabr_msgs::rows`], under the writer's rules), then hands them to the
+//! same recording rows ([`sabr_recording::live`], under the writer's rules), then hands them to the
 //! same library call as `sabr calibrate`. The library uses only the session's span of the data
 //! (`sabr_calibration::data::span`), so the parameters equal those of `sabr calibrate` on the
 //! recorder's recording, which also holds the graph's idle start and the later line test.

@@ -9,7 +9,7 @@ use sabr_recording::{
 };
 use std::path::PathBuf;
 
-use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
+use sabr_recording::live::{encoder_row, phase_row, tracker_rows};
 
 /// Counters of the live streams, written to `live.json`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]

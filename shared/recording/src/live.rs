@@ -1,8 +1,9 @@
-//! The live messages as recording rows (docs/robot-model.md §7): the one conversion `sabr-recorder`
-//! writes to disk and the live calibrator keeps in memory, so both hold the same session.
+//! The live graph's messages as recording rows (docs/robot-model.md §7): the one conversion
+//! `sabr-recorder` writes to disk and the live calibrator keeps in memory, so both hold the same
+//! session. Behind the `live` feature, so offline users of the format do not link iceoryx2.
 
-use crate::{EncoderSample, PhaseMark, Tool, ToolSample, ToolStatus, TrackerFrame};
-use sabr_recording::{EncoderRow, PhaseRow, ToolReading, TrackerRow};
+use crate::rows::{EncoderRow, PhaseRow, Tool as RecordedTool, ToolReading, TrackerRow};
+use sabr_msgs::{EncoderSample, PhaseMark, Tool, ToolSample, ToolStatus, TrackerFrame};
 
 /// `encoders.csv` row of an encoder sample: its host stamp and raw counts.
 pub fn encoder_row(sample: &EncoderSample) -> EncoderRow {
@@ -33,12 +34,12 @@ pub fn phase_row(mark: &PhaseMark) -> PhaseRow {
 }
 
 /// The recording's name for a tracker tool.
-fn recording_tool(tool: Tool) -> sabr_recording::Tool {
+fn recording_tool(tool: Tool) -> RecordedTool {
     match tool {
-        Tool::Base => sabr_recording::Tool::Base,
-        Tool::Front => sabr_recording::Tool::Front,
-        Tool::Back => sabr_recording::Tool::Back,
-        Tool::Tip => sabr_recording::Tool::Tip,
+        Tool::Base => RecordedTool::Base,
+        Tool::Front => RecordedTool::Front,
+        Tool::Back => RecordedTool::Back,
+        Tool::Tip => RecordedTool::Tip,
     }
 }
 
