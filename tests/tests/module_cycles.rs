@@ -1,15 +1,21 @@
 //! No crate of the workspace has a cycle between its top-level modules: each module uses only
 //! what is below it, so a crate reads top-down.
 //!
-//! For every workspace member, every top-level module of `src/` (a file `src/x.rs` or a
-//! folder `src/x/`) and every `.rs` file inside it are scanned, comments and string literals
-//! stripped, for the paths that name another top-level module: `crate::x`, `crate::{x, y}`,
-//! and `super::x` where that `super` chain reaches the crate root. A path to an item the crate
-//! root re-exports (`pub use x::Item;` in `lib.rs`/`main.rs`) counts as a use of `x`. The test
-//! fails naming every cycle (strongly connected set of modules) with one file:line per edge.
+//! For every workspace member, every top-level module of `src/` (a file `src/x.rs` or a folder
+//! `src/x/`) and every `.rs` file inside it are parsed with `syn`, and every path that names
+//! another top-level module is collected: `crate::x`, `use crate::{x, y}` (at any depth of a use
+//! group), and `super::x` where that `super` chain reaches the crate root, in items, expressions,
+//! types and the token streams of macro calls. A path to an item the crate root re-exports
+//! (`pub use x::Item;` in `lib.rs`/`main.rs`) counts as a use of `x`. The modules and those uses
+//! form a graph; the test fails naming every strongly connected set of more than one module
+//! (`petgraph`'s Tarjan), with one file:line per edge.
 
+use petgraph::algo::tarjan_scc;
+use petgraph::graph::DiGraph;
+use proc_macro2::{TokenStream, TokenTree};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
+use syn::visit::Visit;
 
 /// One use of a top-level module by another: where it is.
 #[derive(Debug, Clone)]
@@ -27,220 +33,176 @@ fn workspace_root() -> PathBuf {
 
 /// The `members` of the workspace manifest.
 fn members(root: &Path) -> Vec<PathBuf> {
-    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).expect("Cargo.toml");
-    let start = manifest.find("members = [").expect("a members list");
-    let list = &manifest[start..];
-    let end = list.find(']').expect("the end of the members list");
-    list[..end]
-        .split('"')
-        .skip(1)
-        .step_by(2)
-        .map(|member| root.join(member))
+    let manifest: toml::Table = std::fs::read_to_string(root.join("Cargo.toml"))
+        .expect("Cargo.toml")
+        .parse()
+        .expect("Cargo.toml is TOML");
+    manifest["workspace"]["members"]
+        .as_array()
+        .expect("a members list")
+        .iter()
+        .map(|member| root.join(member.as_str().expect("a member path")))
         .collect()
 }
 
-/// Source text without comments, string and character literals (replaced by spaces, so the
-/// line numbers stay).
-fn code_only(text: &str) -> String {
-    let bytes: Vec<char> = text.chars().collect();
-    let mut out = String::with_capacity(text.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        let c = bytes[i];
-        let next = bytes.get(i + 1).copied();
-        if c == '/' && next == Some('/') {
-            while i < bytes.len() && bytes[i] != '\n' {
-                i += 1;
+fn parse(file: &Path) -> syn::File {
+    let text = std::fs::read_to_string(file).expect("source file");
+    syn::parse_file(&text).unwrap_or_else(|e| panic!("{}: {e}", file.display()))
+}
+
+/// Collects the first path segment after the crate root of every path in a file whose module
+/// is `depth` levels below the root, with its line.
+struct RootUses {
+    depth: usize,
+    found: Vec<(String, usize)>,
+}
+
+impl RootUses {
+    /// The segment after the root in `segments`, if they start at the root.
+    fn note<'a>(&mut self, mut segments: impl Iterator<Item = &'a syn::Ident>) {
+        let Some(first) = segments.next() else {
+            return;
+        };
+        let head = if first == "crate" {
+            segments.next()
+        } else if first == "super" {
+            let mut supers = 1;
+            let mut next = segments.next();
+            while next.is_some_and(|s| s == "super") {
+                supers += 1;
+                next = segments.next();
             }
-        } else if c == '/' && next == Some('*') {
-            let mut depth = 0;
-            while i < bytes.len() {
-                if bytes[i] == '/' && bytes.get(i + 1) == Some(&'*') {
-                    depth += 1;
-                    i += 2;
-                } else if bytes[i] == '*' && bytes.get(i + 1) == Some(&'/') {
-                    depth -= 1;
-                    i += 2;
-                    if depth == 0 {
-                        break;
-                    }
-                } else {
-                    out.push(if bytes[i] == '\n' { '\n' } else { ' ' });
-                    i += 1;
-                }
-            }
-        } else if c == '"' || (c == 'r' && (next == Some('"') || next == Some('#'))) {
-            i = skip_string(&bytes, i, &mut out);
-        } else if c == '\'' {
-            // A character literal ('x', '\n', '\u{..}'); a lifetime ('a) is left as it is.
-            let close = (i + 2..(i + 12).min(bytes.len())).find(|&k| bytes[k] == '\'');
-            match close {
-                Some(k) if bytes[i + 1] == '\\' || k == i + 2 => {
-                    out.push(' ');
-                    i = k + 1;
-                }
-                _ => {
-                    out.push(c);
-                    i += 1;
-                }
-            }
+            next.filter(|_| supers == self.depth)
         } else {
-            out.push(c);
-            i += 1;
+            None
+        };
+        if let Some(head) = head {
+            self.found
+                .push((head.to_string(), head.span().start().line));
         }
     }
-    out
-}
 
-/// Skips a (raw) string literal starting at `start`; returns the index after it.
-fn skip_string(bytes: &[char], start: usize, out: &mut String) -> usize {
-    let mut i = start;
-    let mut hashes = 0;
-    let raw = bytes[i] == 'r';
-    if raw {
-        i += 1;
-        while bytes.get(i) == Some(&'#') {
-            hashes += 1;
-            i += 1;
-        }
-        if bytes.get(i) != Some(&'"') {
-            // An identifier starting with r (not a raw string).
-            out.extend(&bytes[start..i]);
-            return i;
-        }
-    }
-    i += 1;
-    while i < bytes.len() {
-        let c = bytes[i];
-        if c == '\n' {
-            out.push('\n');
-        }
-        if !raw && c == '\\' {
-            i += 2;
-            continue;
-        }
-        if c == '"' && (0..hashes).all(|h| bytes.get(i + 1 + h) == Some(&'#')) {
-            out.push(' ');
-            return i + 1 + hashes;
-        }
-        i += 1;
-    }
-    i
-}
-
-fn is_ident(c: char) -> bool {
-    c.is_alphanumeric() || c == '_'
-}
-
-/// The identifiers at the top level of the group starting at `text[0] == '{'`.
-fn group_heads(text: &str) -> Vec<String> {
-    let mut heads = Vec::new();
-    let mut depth = 0;
-    let mut expecting = false;
-    let mut current = String::new();
-    for c in text.chars() {
-        match c {
-            '{' => {
-                depth += 1;
-                expecting = depth == 1;
+    /// Every use-path in a use tree, as the idents from its start down to each leaf.
+    fn use_tree(&mut self, prefix: &mut Vec<syn::Ident>, tree: &syn::UseTree) {
+        match tree {
+            syn::UseTree::Path(path) => {
+                prefix.push(path.ident.clone());
+                self.use_tree(prefix, &path.tree);
+                prefix.pop();
             }
-            '}' => {
-                depth -= 1;
-                if depth == 0 {
-                    break;
+            syn::UseTree::Name(name) => self.leaf(prefix, &name.ident),
+            syn::UseTree::Rename(rename) => self.leaf(prefix, &rename.ident),
+            syn::UseTree::Glob(_) => self.note(prefix.iter()),
+            syn::UseTree::Group(group) => {
+                for item in &group.items {
+                    self.use_tree(prefix, item);
                 }
             }
-            ',' if depth == 1 => {
-                if !current.is_empty() {
-                    heads.push(std::mem::take(&mut current));
+        }
+    }
+
+    fn leaf(&mut self, prefix: &[syn::Ident], ident: &syn::Ident) {
+        self.note(prefix.iter().chain(std::iter::once(ident)));
+    }
+
+    /// Paths written inside a macro call: runs of `ident :: ident :: ...` in its tokens.
+    fn tokens(&mut self, tokens: TokenStream) {
+        let mut run: Vec<syn::Ident> = Vec::new();
+        let mut colons = 0;
+        for token in tokens {
+            match token {
+                TokenTree::Ident(ident) if run.is_empty() || colons == 2 => {
+                    run.push(ident);
+                    colons = 0;
                 }
-                expecting = true;
+                TokenTree::Punct(p) if p.as_char() == ':' && !run.is_empty() && colons < 2 => {
+                    colons += 1;
+                }
+                other => {
+                    self.note(run.iter());
+                    run.clear();
+                    colons = 0;
+                    match other {
+                        TokenTree::Group(group) => self.tokens(group.stream()),
+                        TokenTree::Ident(ident) => run.push(ident),
+                        _ => {}
+                    }
+                }
             }
-            c if depth == 1 && expecting && is_ident(c) => current.push(c),
-            _ if depth == 1 && expecting && !current.is_empty() => {
-                heads.push(std::mem::take(&mut current));
-                expecting = false;
+        }
+        self.note(run.iter());
+    }
+}
+
+impl<'ast> Visit<'ast> for RootUses {
+    fn visit_item_use(&mut self, item: &'ast syn::ItemUse) {
+        self.use_tree(&mut Vec::new(), &item.tree);
+    }
+
+    fn visit_path(&mut self, path: &'ast syn::Path) {
+        self.note(path.segments.iter().map(|s| &s.ident));
+        syn::visit::visit_path(self, path);
+    }
+
+    fn visit_macro(&mut self, mac: &'ast syn::Macro) {
+        self.tokens(mac.tokens.clone());
+        syn::visit::visit_macro(self, mac);
+    }
+}
+
+/// The first path segments reached from the crate root in a file whose module is `depth`
+/// levels below the root, with their lines.
+fn root_uses(file: &syn::File, depth: usize) -> Vec<(String, usize)> {
+    let mut uses = RootUses {
+        depth,
+        found: Vec::new(),
+    };
+    uses.visit_file(file);
+    uses.found
+}
+
+/// Names the crate root re-exports (`pub use x::...;`), with the top-level module each comes
+/// from.
+fn root_reexports(root: &syn::File) -> BTreeMap<String, String> {
+    fn leaves(module: &str, tree: &syn::UseTree, out: &mut BTreeMap<String, String>) {
+        match tree {
+            syn::UseTree::Path(path) => leaves(module, &path.tree, out),
+            syn::UseTree::Name(name) if name.ident != "self" => {
+                out.insert(name.ident.to_string(), module.to_owned());
+            }
+            syn::UseTree::Rename(rename) => {
+                out.insert(rename.rename.to_string(), module.to_owned());
+            }
+            syn::UseTree::Group(group) => {
+                for item in &group.items {
+                    leaves(module, item, out);
+                }
             }
             _ => {}
         }
     }
-    if !current.is_empty() {
-        heads.push(current);
-    }
-    heads
-}
-
-/// The first path segments reached from the crate root in `code` of a file whose module
-/// is `depth` levels below the root, with their line numbers.
-fn root_paths(code: &str, depth: usize) -> Vec<(String, usize)> {
-    let mut found = Vec::new();
-    let chars: Vec<(usize, char)> = code.char_indices().collect();
-    let line_of = |byte: usize| code[..byte].matches('\n').count() + 1;
-    let mut k = 0;
-    while k < chars.len() {
-        let (byte, _) = chars[k];
-        let rest = &code[byte..];
-        let before_ok = k == 0 || !is_ident(chars[k - 1].1) && chars[k - 1].1 != ':';
-        let (prefix_len, reaches_root) = if before_ok && rest.starts_with("crate::") {
-            ("crate::".len(), true)
-        } else if before_ok && rest.starts_with("super::") {
-            let mut len = 0;
-            let mut supers = 0;
-            while rest[len..].starts_with("super::") {
-                len += "super::".len();
-                supers += 1;
-            }
-            (len, supers == depth)
-        } else {
-            k += 1;
+    let mut names = BTreeMap::new();
+    for item in &root.items {
+        let syn::Item::Use(item) = item else { continue };
+        if !matches!(item.vis, syn::Visibility::Public(_)) {
             continue;
-        };
-        if reaches_root {
-            let tail = &rest[prefix_len..];
-            if tail.starts_with('{') {
-                for head in group_heads(tail) {
-                    found.push((head, line_of(byte)));
-                }
-            } else {
-                let head: String = tail.chars().take_while(|c| is_ident(*c)).collect();
-                if !head.is_empty() {
-                    found.push((head, line_of(byte)));
-                }
+        }
+        let mut tree = &item.tree;
+        if let syn::UseTree::Path(path) = tree {
+            if path.ident == "crate" || path.ident == "self" {
+                tree = &path.tree;
             }
         }
-        k += code[byte..byte + prefix_len].chars().count();
-    }
-    found
-}
-
-/// Names the crate root re-exports, with the top-level module each comes from.
-fn root_reexports(root_file: &str) -> BTreeMap<String, String> {
-    let code = code_only(root_file);
-    let mut names = BTreeMap::new();
-    for statement in code.split(';') {
-        let statement = statement.trim();
-        let Some(path) = statement
-            .strip_prefix("pub use ")
-            .or_else(|| statement.strip_prefix("pub(crate) use "))
-        else {
-            continue;
-        };
-        let path = path
-            .trim_start_matches("crate::")
-            .trim_start_matches("self::");
-        let module: String = path.chars().take_while(|c| is_ident(*c)).collect();
-        let Some(brace) = path.find('{') else {
-            let last = path.rsplit("::").next().unwrap_or("");
-            let name = last.rsplit(" as ").next().unwrap_or(last).trim();
-            names.insert(name.to_string(), module);
-            continue;
-        };
-        for item in path[brace + 1..].trim_end_matches('}').split(',') {
-            let last = item.rsplit("::").next().unwrap_or("").trim();
-            let name = last.rsplit(" as ").next().unwrap_or(last).trim();
-            if !name.is_empty() && name != "self" {
-                names.insert(name.to_string(), module.clone());
+        match tree {
+            syn::UseTree::Path(path) => leaves(&path.ident.to_string(), &path.tree, &mut names),
+            syn::UseTree::Group(group) => {
+                for item in &group.items {
+                    if let syn::UseTree::Path(path) = item {
+                        leaves(&path.ident.to_string(), &path.tree, &mut names);
+                    }
+                }
             }
+            _ => {}
         }
     }
     names
@@ -275,8 +237,7 @@ fn module_depth(src: &Path, file: &Path) -> usize {
 
 /// The module graph of one source root (`src/` with `root_name` = `lib.rs` or `main.rs`).
 fn module_graph(src: &Path, root_name: &str) -> BTreeMap<String, Vec<Edge>> {
-    let root_text = std::fs::read_to_string(src.join(root_name)).unwrap_or_default();
-    let reexports = root_reexports(&root_text);
+    let reexports = root_reexports(&parse(&src.join(root_name)));
     let mut modules: BTreeMap<String, Vec<PathBuf>> = BTreeMap::new();
     let mut entries: Vec<PathBuf> = std::fs::read_dir(src)
         .expect("src")
@@ -303,8 +264,7 @@ fn module_graph(src: &Path, root_name: &str) -> BTreeMap<String, Vec<Edge>> {
     for (module, files) in &modules {
         let mut edges: Vec<Edge> = Vec::new();
         for file in files {
-            let code = code_only(&std::fs::read_to_string(file).expect("source file"));
-            for (head, line) in root_paths(&code, module_depth(src, file)) {
+            for (head, line) in root_uses(&parse(file), module_depth(src, file)) {
                 let target = if names.contains(&head) {
                     Some(head)
                 } else {
@@ -325,64 +285,31 @@ fn module_graph(src: &Path, root_name: &str) -> BTreeMap<String, Vec<Edge>> {
     graph
 }
 
-/// Strongly connected sets of more than one module (Tarjan).
+/// Strongly connected sets of more than one module, each sorted.
 fn cycles(graph: &BTreeMap<String, Vec<Edge>>) -> Vec<Vec<String>> {
-    struct State<'a> {
-        graph: &'a BTreeMap<String, Vec<Edge>>,
-        index: BTreeMap<&'a str, usize>,
-        low: BTreeMap<&'a str, usize>,
-        stack: Vec<&'a str>,
-        on_stack: BTreeSet<&'a str>,
-        next: usize,
-        found: Vec<Vec<String>>,
-    }
-    fn visit<'a>(state: &mut State<'a>, node: &'a str) {
-        state.index.insert(node, state.next);
-        state.low.insert(node, state.next);
-        state.next += 1;
-        state.stack.push(node);
-        state.on_stack.insert(node);
-        for edge in &state.graph[node] {
-            let to = edge.to.as_str();
-            if !state.index.contains_key(to) {
-                visit(state, to);
-                let low = state.low[to].min(state.low[node]);
-                state.low.insert(node, low);
-            } else if state.on_stack.contains(to) {
-                let low = state.index[to].min(state.low[node]);
-                state.low.insert(node, low);
-            }
-        }
-        if state.low[node] == state.index[node] {
-            let mut component = Vec::new();
-            while let Some(top) = state.stack.pop() {
-                state.on_stack.remove(top);
-                component.push(top.to_string());
-                if top == node {
-                    break;
-                }
-            }
-            if component.len() > 1 {
-                component.sort();
-                state.found.push(component);
+    let mut digraph = DiGraph::<&str, ()>::new();
+    let index: BTreeMap<&str, _> = graph
+        .keys()
+        .map(|name| (name.as_str(), digraph.add_node(name.as_str())))
+        .collect();
+    for (from, edges) in graph {
+        for edge in edges {
+            if let Some(&to) = index.get(edge.to.as_str()) {
+                digraph.add_edge(index[from.as_str()], to, ());
             }
         }
     }
-    let mut state = State {
-        graph,
-        index: BTreeMap::new(),
-        low: BTreeMap::new(),
-        stack: Vec::new(),
-        on_stack: BTreeSet::new(),
-        next: 0,
-        found: Vec::new(),
-    };
-    for node in graph.keys() {
-        if !state.index.contains_key(node.as_str()) {
-            visit(&mut state, node);
-        }
-    }
-    state.found
+    let mut found: Vec<Vec<String>> = tarjan_scc(&digraph)
+        .into_iter()
+        .filter(|component| component.len() > 1)
+        .map(|component| {
+            let mut names: Vec<String> = component.iter().map(|&n| digraph[n].to_owned()).collect();
+            names.sort();
+            names
+        })
+        .collect();
+    found.sort();
+    found
 }
 
 #[test]
@@ -426,19 +353,41 @@ fn no_crate_has_a_cycle_between_its_top_level_modules() {
 }
 
 #[test]
-fn the_scanner_finds_grouped_super_and_reexported_uses() {
-    let code = code_only(
-        "use crate::{alpha::{A, B}, beta, Gamma};\n// crate::comment\nlet s = \"crate::text\";\n\
-         fn f() { super::delta::g(); super::super::epsilon::h(); }\n",
+fn the_scanner_finds_grouped_super_macro_and_reexported_uses() {
+    let file = syn::parse_file(
+        "use crate::{alpha::{A, B}, beta, Gamma};\n// crate::comment\n\
+         fn f() { let s = \"crate::text\"; super::delta::g(); super::super::epsilon::h(); }\n\
+         fn m() { println!(\"{}\", crate::zeta::Z); }\n",
+    )
+    .unwrap();
+    let heads = |depth| -> Vec<String> {
+        root_uses(&file, depth)
+            .into_iter()
+            .map(|(head, _)| head)
+            .collect()
+    };
+    assert_eq!(
+        heads(1),
+        ["alpha", "alpha", "beta", "Gamma", "delta", "zeta"]
     );
-    let at_depth_1: Vec<String> = root_paths(&code, 1).into_iter().map(|(h, _)| h).collect();
-    assert_eq!(at_depth_1, ["alpha", "beta", "Gamma", "delta"]);
-    let at_depth_2: Vec<String> = root_paths(&code, 2).into_iter().map(|(h, _)| h).collect();
-    assert_eq!(at_depth_2, ["alpha", "beta", "Gamma", "epsilon"]);
-    let reexports = root_reexports("pub use gamma::{Gamma, Other as Renamed};\npub use beta::B;");
+    assert_eq!(
+        heads(2),
+        ["alpha", "alpha", "beta", "Gamma", "epsilon", "zeta"]
+    );
+    let lines: Vec<usize> = root_uses(&file, 1).into_iter().map(|(_, l)| l).collect();
+    assert_eq!(lines, [1, 1, 1, 1, 3, 4]);
+    let root = syn::parse_file(
+        "mod gamma;\npub use gamma::{Gamma, Other as Renamed};\npub use beta::B;\nuse hidden::H;",
+    )
+    .unwrap();
+    let reexports = root_reexports(&root);
     assert_eq!(reexports["Gamma"], "gamma");
     assert_eq!(reexports["Renamed"], "gamma");
     assert_eq!(reexports["B"], "beta");
+    assert!(
+        !reexports.contains_key("H"),
+        "a private use is no re-export"
+    );
     let graph: BTreeMap<String, Vec<Edge>> = [("a", "b"), ("b", "c"), ("c", "a"), ("d", "a")]
         .into_iter()
         .map(|(from, to)| {
