@@ -152,13 +152,10 @@ fn joints_row(params: &RobotParams, q: &Joints, with_counts: bool) -> Result<Vec
     Ok(row)
 }
 
-/// Reads a `robot.toml` or `params.toml`; errors name the file (and the parser's line and
-/// column, or the field).
+/// Reads a `robot.toml` or `params.toml` with the one parameter-file reader; errors name
+/// the file, the line and the field.
 fn load_params(path: &Path) -> anyhow::Result<RobotParams> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read parameter file {}", path.display()))?;
-    RobotParams::from_toml_str(&text)
-        .with_context(|| format!("invalid parameter file {}", path.display()))
+    Ok(sabr_model::read_params_file(path)?)
 }
 
 /// CSV writer on standard output (rows may be shorter than the header: error rows).

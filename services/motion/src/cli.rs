@@ -142,7 +142,7 @@ impl Args {
     /// The robot parameters (`--params`, else nominal).
     pub fn robot_params(&self) -> anyhow::Result<RobotParams> {
         match &self.params {
-            Some(path) => Ok(sabr_ik::load_params(path)?),
+            Some(path) => Ok(sabr_model::read_params_file(path)?),
             None => Ok(RobotParams::nominal()),
         }
     }

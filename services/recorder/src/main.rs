@@ -57,14 +57,15 @@ fn main() -> ExitCode {
     }
 }
 
+/// The nominal model's `robot.toml` text: the file given (checked by the one `robot.toml`
+/// reader), else the built-in one.
 fn robot_toml(path: Option<&Path>) -> anyhow::Result<String> {
     let Some(path) = path else {
         return Ok(sabr_model::RobotParams::nominal().to_toml_string());
     };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("--robot-toml {}: cannot read", path.display()))?;
-    sabr_model::RobotParams::from_toml_str(&text)
-        .with_context(|| format!("--robot-toml {}", path.display()))?;
+    let robot = sabr_recording::RobotToml::read(path).context("--robot-toml")?;
+    let text = robot.text.clone();
+    robot.biopsy().context("--robot-toml")?;
     Ok(text)
 }
 

@@ -1,27 +1,23 @@
 //! The tracker's exposure clock, estimated online: a robust line through the tracker's frame
 //! counter and the host arrival stamps of the most recent frames.
 //!
-//! The line is the same one the calibrator fits offline (`sabr_calibration::timesync::ClockFit`):
-//! the slope starts at the median per-tick interval (robust to skipped frames and counter
-//! increments ≠ 1), then iteratively reweighted least squares with a Huber loss on the MAD
-//! scale refine it (robust to jitter and to late frames, which only ever arrive late). The
-//! tracker latency is defined against this central line, so `exposure = line − latency` with
-//! either a configured or a calibrated latency. Here the fit runs over a sliding window and is
-//! evaluated at the newest frame, warm-started from the previous fit.
+//! The line is the engine's [`ClockLine`], the one the calibrator fits offline over a whole
+//! recording (`sabr_calibration::data::clock::ClockFit`): the slope starts at the median
+//! per-tick interval (robust to skipped frames and counter increments ≠ 1), then iteratively
+//! reweighted least squares with a Huber loss on the MAD scale refine it (robust to jitter and
+//! to late frames, which only ever arrive late). The tracker latency is defined against this
+//! central line, so `exposure = line − latency` with either a configured or a calibrated
+//! latency. Here the fit runs over a sliding window and is evaluated at the newest frame,
+//! warm-started from the previous fit; this module adds only the window, the counter
+//! unwrapping with restarts, and the line's uncertainty at the newest frame.
 
+use sabr_calibration::data::clock::ClockLine;
+use sabr_calibration::math::stats::median;
 use std::collections::VecDeque;
 
-/// Huber threshold in units of the robust scale (95 % efficiency for Gaussian jitter).
-const HUBER_K: f64 = 1.345;
-/// Most reweighting iterations per frame (the fit is warm-started, so a few suffice).
-const MAX_ITERATIONS: usize = 20;
 /// Iterations stop when the line moves less than this at both ends of the window (ns): far
 /// below the jitter of any tracker.
 const CONVERGED_NS: f64 = 50.0;
-/// Smallest robust scale used for the weights (ns), so noise-free input stays well defined.
-const MIN_SCALE_NS: f64 = 1.0;
-/// MAD to standard deviation for Gaussian data.
-const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// Settings of the online clock fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -240,35 +236,14 @@ impl FrameClock {
             .iter()
             .map(|p| (p.arrival_ns - newest.arrival_ns) as f64)
             .collect();
-        let (mut intercept, mut slope) = match &self.line {
+        let start = match &self.line {
             // Warm start: the previous line moved to the new origin.
             Some(line) => (line.at(newest.tick) - newest.arrival_ns as f64, line.slope),
-            None => initial_line(&x, &y),
+            None => ClockLine::start(&x, &y)
+                .expect("the window holds at least 3 frames with strictly increasing ticks"),
         };
-        let span = x.first().map_or(0.0, |first| -first);
-        let mut residuals = vec![0.0; x.len()];
-        let mut weights = vec![1.0; x.len()];
-        let mut scale = MIN_SCALE_NS;
-        for _ in 0..MAX_ITERATIONS {
-            for (r, (xi, yi)) in residuals.iter_mut().zip(x.iter().zip(&y)) {
-                *r = yi - intercept - slope * xi;
-            }
-            scale = robust_scale(&residuals).max(MIN_SCALE_NS);
-            for (w, r) in weights.iter_mut().zip(&residuals) {
-                *w = huber_weight(r / scale, HUBER_K);
-            }
-            let Some((new_intercept, new_slope)) = weighted_line(&x, &y, &weights) else {
-                break;
-            };
-            let moved = (new_intercept - intercept)
-                .abs()
-                .max((new_intercept - new_slope * span - (intercept - slope * span)).abs());
-            intercept = new_intercept;
-            slope = new_slope;
-            if moved < CONVERGED_NS {
-                break;
-            }
-        }
+        let fitted = ClockLine::refine(&x, &y, start, CONVERGED_NS);
+        let (intercept, slope, scale) = (fitted.intercept_ns, fitted.slope_ns, fitted.spread_ns);
         self.line = Some(Line {
             origin_tick: newest.tick,
             origin_ns: newest.arrival_ns,
@@ -297,19 +272,6 @@ fn consecutive_slopes(points: &VecDeque<Point>) -> Vec<f64> {
         .collect()
 }
 
-/// The starting line: median per-tick interval, then the median offset.
-fn initial_line(x: &[f64], y: &[f64]) -> (f64, f64) {
-    let mut slopes: Vec<f64> = x
-        .windows(2)
-        .zip(y.windows(2))
-        .filter(|(dx, _)| dx[1] > dx[0])
-        .map(|(dx, dy)| (dy[1] - dy[0]) / (dx[1] - dx[0]))
-        .collect();
-    let slope = median(&mut slopes);
-    let mut offsets: Vec<f64> = x.iter().zip(y).map(|(xi, yi)| yi - slope * xi).collect();
-    (median(&mut offsets), slope)
-}
-
 /// `sqrt(1/n + (x₀ − x̄)² / Sxx)` at `x₀ = 0`: the standard error of a least-squares line at
 /// the newest frame per unit of noise.
 fn extrapolation_factor(x: &[f64]) -> f64 {
@@ -320,61 +282,6 @@ fn extrapolation_factor(x: &[f64]) -> f64 {
         return f64::INFINITY;
     }
     (1.0 / n + mean * mean / sxx).sqrt()
-}
-
-/// Huber weight of a standardised residual `u` with threshold `k`.
-fn huber_weight(u: f64, k: f64) -> f64 {
-    let a = u.abs();
-    if a <= k {
-        1.0
-    } else {
-        k / a
-    }
-}
-
-/// Median of `values` (reorders them); NaN when empty.
-fn median(values: &mut [f64]) -> f64 {
-    let n = values.len();
-    if n == 0 {
-        return f64::NAN;
-    }
-    let (_, upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
-    let upper = *upper;
-    if n % 2 == 1 {
-        return upper;
-    }
-    let lower = values[..n / 2]
-        .iter()
-        .copied()
-        .max_by(f64::total_cmp)
-        .unwrap_or(upper);
-    0.5 * (lower + upper)
-}
-
-/// Robust standard deviation: 1.4826 · median absolute deviation from the median.
-fn robust_scale(values: &[f64]) -> f64 {
-    let mut work = values.to_vec();
-    let centre = median(&mut work);
-    for (w, v) in work.iter_mut().zip(values) {
-        *w = (v - centre).abs();
-    }
-    MAD_TO_SIGMA * median(&mut work)
-}
-
-/// Weighted least-squares line `y ≈ intercept + slope · x`; `None` if `x` does not vary.
-fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
-    let sw: f64 = w.iter().sum();
-    let mx = x.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
-    let my = y.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for ((xi, yi), wi) in x.iter().zip(y).zip(w) {
-        sxy += wi * (xi - mx) * (yi - my);
-        sxx += wi * (xi - mx) * (xi - mx);
-    }
-    (sxx > 0.0).then(|| {
-        let slope = sxy / sxx;
-        (my - slope * mx, slope)
-    })
 }
 
 #[cfg(test)]
@@ -521,12 +428,5 @@ mod tests {
             "{}",
             e.period_ns
         );
-    }
-
-    #[test]
-    fn median_of_even_and_odd_counts() {
-        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
-        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
-        assert!(median(&mut []).is_nan());
     }
 }

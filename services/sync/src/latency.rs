@@ -1,13 +1,11 @@
 //! Which tracker latency the synchroniser subtracts: the configured one until a parameter set
 //! with a calibrated latency (`[calibration] latency_ms` of a `params.toml`) is loaded.
 
-use sabr_model::RobotParams;
+use sabr_model::{read_params_file, ParamsFileError, RobotParams};
 use std::path::{Path, PathBuf};
 
+pub use sabr_model::MAX_LATENCY_MS;
 pub use sabr_msgs::LatencySource;
-
-/// Largest latency accepted from the command line or a parameter file, ms.
-pub const MAX_LATENCY_MS: f64 = 1000.0;
 
 /// The latency in use: ns, and where it came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,45 +27,16 @@ pub struct ParameterSet {
     pub latency_ns: Option<i64>,
 }
 
-/// Why a parameter file was not used; names the file and the reason.
-#[derive(Debug, thiserror::Error)]
-pub enum ParamsFileError {
-    /// Unreadable.
-    #[error("{path}: cannot read: {source}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// Not a valid `robot.toml`/`params.toml`.
-    #[error("{path}: {reason}")]
-    Invalid {
-        /// The file.
-        path: PathBuf,
-        /// Parser or validation message (with line and field).
-        reason: String,
-    },
-}
-
-/// Reads a `robot.toml` or `params.toml`, with its calibrated latency if any.
+/// Reads a `robot.toml` or `params.toml` (the one parameter-file reader, which also checks
+/// that a calibrated latency lies within 0..=[`MAX_LATENCY_MS`]), with its calibrated latency
+/// if any.
 pub fn read_parameter_set(path: &Path) -> Result<ParameterSet, ParamsFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ParamsFileError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let invalid = |reason: String| ParamsFileError::Invalid {
-        path: path.to_path_buf(),
-        reason,
-    };
-    let params = RobotParams::from_toml_str(&text).map_err(|e| invalid(e.to_string()))?;
-    let latency_ns = match params.calibration.as_ref().and_then(|c| c.latency_ms) {
-        Some(ms) => Some(
-            latency_ns(ms)
-                .map_err(|reason| invalid(format!("field `calibration.latency_ms`: {reason}")))?,
-        ),
-        None => None,
-    };
+    let params = read_params_file(path)?;
+    let latency_ns = params
+        .calibration
+        .as_ref()
+        .and_then(|c| c.latency_ms)
+        .map(|ms| (ms * 1e6).round() as i64);
     Ok(ParameterSet {
         path: path.to_path_buf(),
         params,

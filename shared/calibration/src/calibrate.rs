@@ -107,12 +107,7 @@ pub fn calibrate(
     // Only the session's own data (not a later test with the new parameters): see
     // `session_span`.
     let recording = &within_session(recording);
-    let robot = RobotParams::from_toml_str(&recording.robot_toml).map_err(|source| {
-        CalibrationError::RobotToml {
-            dir: recording.dir.clone(),
-            source,
-        }
-    })?;
+    let robot = recording.robot().map_err(CalibrationError::RobotToml)?;
     let phases = PhaseTable::new(&recording.phases);
     for (phase, name, why) in REQUIRED_PHASES {
         if !phases.contains(phase) {

@@ -1,19 +1,12 @@
 //! Why a calibration was refused. Every variant says what is missing or wrong in the
 //! recording, so that a bad recording never yields a silently bad model.
 
-use std::path::PathBuf;
-
 /// A calibration failure, with what is missing and why it matters.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrationError {
-    /// `robot.toml` of the recording could not be parsed.
-    #[error("{dir}/robot.toml: {source}")]
-    RobotToml {
-        /// The recording directory.
-        dir: PathBuf,
-        /// The parser's complaint.
-        source: sabr_model::ParamsError,
-    },
+    /// `robot.toml` of the recording is invalid (the error names the file, line and field).
+    #[error(transparent)]
+    RobotToml(sabr_recording::RecordingError),
     /// The recording has no usable tracker frames at all.
     #[error("{0}")]
     NoTrackerFrames(String),

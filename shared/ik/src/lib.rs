@@ -24,10 +24,10 @@
 //! [`services::CALIBRATOR_PARAMETERS`]: sabr_msgs::services::CALIBRATOR_PARAMETERS
 
 mod client;
-mod params_file;
+mod parameter_set;
 pub mod server;
 mod solver;
 
 pub use client::{IkClient, IkClientError};
-pub use params_file::{load_params, ParameterSet, ParamsFileError};
+pub use parameter_set::ParameterSet;
 pub use solver::{IkSolver, ReloadOutcome};

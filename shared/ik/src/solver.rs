@@ -1,6 +1,7 @@
 //! The IK answer to one request, with the parameter set in service.
 
-use crate::params_file::{ParameterSet, ParamsFileError};
+use crate::parameter_set::ParameterSet;
+use sabr_model::ParamsFileError;
 use nalgebra::{Point3, Vector3};
 use sabr_model::{inverse, JointMotion, KinematicsError};
 use sabr_msgs::{FixedString, IkRequest, IkResponse, IkStatus, ParameterSetAnnouncement};

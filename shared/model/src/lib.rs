@@ -3,7 +3,8 @@
 //! calibration session plan (which the simulator and the motion executor both run).
 //!
 //! Everything follows `docs/robot-model.md` (the project contract). Units: millimetres and
-//! radians. No I/O: parameter files are parsed from and written to strings.
+//! radians. The only I/O is reading a parameter file ([`params_file`], the one reader every
+//! process uses); everything else works on strings and values.
 //!
 //! Serial and branched arms described by URDF are [`tree::KinematicTree`]s
 //! ([`KinematicTree::from_urdf_str`]): forward kinematics of every link, geometric error
@@ -12,6 +13,7 @@
 pub mod effects;
 pub mod kinematics;
 pub mod params;
+pub mod params_file;
 pub mod plan;
 pub mod tree;
 pub mod urdf;
@@ -24,8 +26,9 @@ pub use effects::{
 pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
 pub use params::{
     CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,
-    RobotParams,
+    RobotParams, MAX_LATENCY_MS,
 };
+pub use params_file::{parse_params_file, read_params_file, ParamsFileError};
 pub use tree::{KinematicTree, LinkId, TargetJacobian, TreeError, TreeState};
 
 /// A joint vector θ1..θ5 in radians (docs/robot-model.md §2).

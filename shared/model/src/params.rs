@@ -106,9 +106,14 @@ pub struct RobotParams {
 /// Why a parameter file was rejected.
 #[derive(Debug, thiserror::Error)]
 pub enum ParamsError {
-    /// TOML syntax or type error, with the line reported by the parser.
-    #[error("{0}")]
-    Syntax(String),
+    /// TOML syntax or type error, as the parser reports it (with line and column).
+    #[error("{message}")]
+    Syntax {
+        /// The parser's message.
+        message: String,
+        /// 1-based line the parser points at, if it points at one.
+        line: Option<usize>,
+    },
     /// A key is missing or has an invalid value.
     #[error("field `{field}`: {reason}")]
     Field {
@@ -120,6 +125,16 @@ pub enum ParamsError {
 }
 
 impl ParamsError {
+    /// The 1-based line of `text` (the parsed file) this error is about: the parser's line
+    /// for a syntax error, the line that sets the field (or opens its table) for a value
+    /// error; `None` when the text does not show it (a field that is absent).
+    pub fn line_in(&self, text: &str) -> Option<usize> {
+        match self {
+            ParamsError::Syntax { line, .. } => *line,
+            ParamsError::Field { field, .. } => line_of_field(text, field),
+        }
+    }
+
     fn field(field: impl Into<String>, reason: impl Into<String>) -> Self {
         Self::Field {
             field: field.into(),
@@ -134,6 +149,38 @@ impl ParamsError {
         )
     }
 }
+
+/// The 1-based line of `text` that sets the dotted `field` (`joints.counts_per_rev[2]`: the
+/// key `counts_per_rev` under `[joints]`), else the line of its table header.
+fn line_of_field(text: &str, field: &str) -> Option<usize> {
+    let path = field.split('[').next().unwrap_or(field);
+    let (table, key) = path.rsplit_once('.').unwrap_or(("", path));
+    let mut current = "";
+    let mut header = None;
+    for (index, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        if let Some(name) = line.strip_prefix('[') {
+            current = name.trim_start_matches('[').split(']').next().unwrap_or("").trim();
+            if current == path {
+                return Some(index + 1);
+            }
+            if current == table && header.is_none() {
+                header = Some(index + 1);
+            }
+            continue;
+        }
+        let sets_key = line
+            .strip_prefix(key)
+            .is_some_and(|rest| rest.trim_start().starts_with('='));
+        if current == table && sets_key {
+            return Some(index + 1);
+        }
+    }
+    header
+}
+
+/// Largest tracker latency a parameter set may hold (ms): exposure to arrival of a frame.
+pub const MAX_LATENCY_MS: f64 = 1000.0;
 
 /// Iterations and tolerance (rad) of the fixed point that inverts the joint-side effects.
 const EFFECT_INVERSION_ITERATIONS: usize = 100;
@@ -174,8 +221,12 @@ impl RobotParams {
     /// Syntax and type errors carry the parser's line and column; value errors name the
     /// dotted field and the reason.
     pub fn from_toml_str(text: &str) -> Result<Self, ParamsError> {
-        let file: ParamsFile =
-            toml::from_str(text).map_err(|error| ParamsError::Syntax(error.to_string()))?;
+        let file: ParamsFile = toml::from_str(text).map_err(|error| ParamsError::Syntax {
+            message: error.to_string(),
+            line: error
+                .span()
+                .map(|span| text[..span.start.min(text.len())].matches('\n').count() + 1),
+        })?;
         let params = file.into_params()?;
         params.validate()?;
         Ok(params)
@@ -251,7 +302,12 @@ impl RobotParams {
         }
         if let Some(calibration) = &self.calibration {
             if let Some(latency) = calibration.latency_ms {
-                check_finite("calibration.latency_ms", latency)?;
+                if !(0.0..=MAX_LATENCY_MS).contains(&latency) {
+                    return Err(ParamsError::field(
+                        "calibration.latency_ms",
+                        format!("latency {latency} ms is outside 0..={MAX_LATENCY_MS} ms"),
+                    ));
+                }
             }
         }
         Ok(())

@@ -142,7 +142,7 @@ fn bad_syntax_is_reported_with_its_line() {
     let text = ROBOT_TOML.replace("l_b = 50.0", "l_b = 50.0.0");
     let (error, message) = error_of(&text);
     println!("{message}");
-    assert!(matches!(error, ParamsError::Syntax(_)));
+    assert!(matches!(error, ParamsError::Syntax { .. }));
     assert!(message.contains("line 5"), "{message}");
 }
 
@@ -151,7 +151,7 @@ fn a_missing_field_is_named() {
     let text = ROBOT_TOML.replace("l_n = 180.0\n", "");
     let (error, message) = error_of(&text);
     println!("{message}");
-    assert!(matches!(error, ParamsError::Syntax(_)));
+    assert!(matches!(error, ParamsError::Syntax { .. }));
     assert!(message.contains("missing field `l_n`"), "{message}");
 }
 

@@ -171,7 +171,7 @@ pub enum RecordingError {
         /// The file.
         path: PathBuf,
     },
-    /// A recording's `robot.toml` is malformed (poses v1).
+    /// A recording's `robot.toml` is malformed (poses v1), or of the other kind.
     #[error("{}: {reason}", path.display())]
     Robot {
         /// The file.
@@ -179,6 +179,10 @@ pub enum RecordingError {
         /// Which key is wrong and why.
         reason: String,
     },
+    /// A recording's `robot.toml` of the biopsy robot is unreadable or invalid (names the
+    /// file, the line and the field).
+    #[error(transparent)]
+    Params(#[from] sabr_model::ParamsFileError),
     /// The operating system refused an operation on a file.
     #[error("{}: cannot {action}: {source}", path.display())]
     Io {

@@ -8,7 +8,7 @@
 //!   [`write_all`] writes a [`Recording`] in one call.
 //!
 //! The static measurement sets of arms described by URDF are a second recording kind,
-//! "poses v1" ([`poses`]).
+//! "poses v1" ([`poses`]). Both kinds' `robot.toml` is read by [`RobotToml`].
 //!
 //! Every error names the file, the 1-based line and the reason ([`RecordingError`]). Floats are
 //! written in Rust's shortest round-trip form, so write → read gives back the same bits.
@@ -22,6 +22,7 @@ mod phases;
 pub mod poses;
 mod reader;
 mod recording;
+pub mod robot_toml;
 mod rows;
 mod tracker;
 mod writer;
@@ -32,6 +33,7 @@ pub use format::{CsvFormat, Fields, RecordBuilder, ROBOT_TOML};
 pub use phases::PhasesCsv;
 pub use reader::{EncoderReader, PhaseReader, ReadOptions, RowReader, TrackerReader};
 pub use recording::Salvage;
+pub use robot_toml::{RobotDescription, RobotToml};
 pub use rows::{EncoderRow, PhaseRow, Recording, Tool, ToolReading, TrackerRow};
 pub use tracker::TrackerCsv;
 pub use writer::{write_all, FlushPolicy, RecordingWriter};

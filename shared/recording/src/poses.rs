@@ -14,13 +14,13 @@
 use std::path::{Component, Path, PathBuf};
 
 mod header;
-mod robot;
 mod rows;
 
-pub use robot::{Measured, PosesRobot, Target, POSES_FORMAT};
+pub use crate::robot_toml::poses::{Measured, PosesRobot, Target, POSES_FORMAT};
 
 use crate::error::{Problem, RecordingError};
 use crate::format::ROBOT_TOML;
+use crate::robot_toml::RobotToml;
 
 /// File name of the pose table in a poses-v1 recording.
 pub const POSES_CSV: &str = "poses.csv";
@@ -83,12 +83,7 @@ impl PosesRecording {
     /// `poses.csv`, checking every row.
     pub fn read(dir: &Path) -> Result<PosesRecording, RecordingError> {
         let toml_path = dir.join(ROBOT_TOML);
-        let text = std::fs::read_to_string(&toml_path)
-            .map_err(|e| RecordingError::open(toml_path.clone(), "read", e))?;
-        let robot = PosesRobot::from_toml_str(&text).map_err(|reason| RecordingError::Robot {
-            path: toml_path.clone(),
-            reason,
-        })?;
+        let robot = RobotToml::read(&toml_path)?.poses()?;
         let urdf_path = dir.join(checked_relative(&robot.urdf, &toml_path)?);
         let urdf_text = std::fs::read_to_string(&urdf_path)
             .map_err(|e| RecordingError::open(urdf_path, "read", e))?;

@@ -5,6 +5,7 @@ use std::path::Path;
 use crate::error::{DroppedTail, RecordingError};
 use crate::format::{CsvFormat, ROBOT_TOML};
 use crate::reader::{ReadOptions, RowReader};
+use crate::robot_toml::RobotToml;
 use crate::rows::Recording;
 use crate::{EncodersCsv, PhasesCsv, TrackerCsv};
 
@@ -35,7 +36,14 @@ impl Recording {
         Self::read_with(dir, options)
     }
 
-    /// Reads the recording in `dir` with `options`.
+    /// The biopsy robot's model of this recording: its `robot.toml` checked by
+    /// [`RobotToml`] (errors name the file, the line and the field).
+    pub fn robot(&self) -> Result<sabr_model::RobotParams, RecordingError> {
+        RobotToml::parse(&self.dir.join(ROBOT_TOML), self.robot_toml.clone())?.biopsy()
+    }
+
+    /// Reads the recording in `dir` with `options`. `robot.toml` is kept as text (check it
+    /// with [`Recording::robot`]).
     pub fn read_with(dir: &Path, options: ReadOptions) -> Result<Salvage, RecordingError> {
         let toml_path = dir.join(ROBOT_TOML);
         let robot_toml = std::fs::read_to_string(&toml_path)

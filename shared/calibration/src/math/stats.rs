@@ -1,4 +1,11 @@
-//! Small robust statistics: median, MAD scale, Huber weights and a robust line fit.
+//! Small robust statistics: median, MAD scale, Huber weights and a robust line fit. The
+//! tracker clock line (offline in the engine, live in `sabr-sync`) is built on these.
+
+/// Huber threshold in units of the robust scale: 95 % efficiency for Gaussian noise.
+pub const HUBER_K: f64 = 1.345;
+
+/// Median absolute deviation to standard deviation, for Gaussian data.
+pub const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// Huber weight of a standardised residual `u` with threshold `k`.
 pub fn huber_weight(u: f64, k: f64) -> f64 {
@@ -10,18 +17,23 @@ pub fn huber_weight(u: f64, k: f64) -> f64 {
     }
 }
 
-/// Median of `values` (reorders them); NaN when empty.
+/// Median of `values` (reorders them, in linear time); NaN when empty.
 pub fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
+    let n = values.len();
+    if n == 0 {
         return f64::NAN;
     }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
+    let (lower_half, upper, _) = values.select_nth_unstable_by(n / 2, f64::total_cmp);
+    let upper = *upper;
     if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
+        return upper;
     }
+    let lower = lower_half
+        .iter()
+        .copied()
+        .max_by(f64::total_cmp)
+        .unwrap_or(upper);
+    0.5 * (lower + upper)
 }
 
 /// Robust standard deviation: 1.4826 · median absolute deviation from the median.
@@ -29,11 +41,12 @@ pub fn robust_scale(values: &[f64]) -> f64 {
     let mut v = values.to_vec();
     let m = median(&mut v);
     let mut deviations: Vec<f64> = values.iter().map(|x| (x - m).abs()).collect();
-    1.4826 * median(&mut deviations)
+    MAD_TO_SIGMA * median(&mut deviations)
 }
 
-/// Weighted least-squares line `y ≈ intercept + slope · x`; returns `(intercept, slope)`.
-pub fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> (f64, f64) {
+/// Weighted least-squares line `y ≈ intercept + slope · x`; returns `(intercept, slope)`, or
+/// `None` when the weighted `x` do not vary.
+pub fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> Option<(f64, f64)> {
     let sw: f64 = w.iter().sum();
     let mx = x.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
     let my = y.iter().zip(w).map(|(a, b)| a * b).sum::<f64>() / sw;
@@ -42,15 +55,17 @@ pub fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> (f64, f64) {
         sxy += wi * (xi - mx) * (yi - my);
         sxx += wi * (xi - mx) * (xi - mx);
     }
-    let slope = sxy / sxx;
-    (my - slope * mx, slope)
+    (sxx > 0.0).then(|| {
+        let slope = sxy / sxx;
+        (my - slope * mx, slope)
+    })
 }
 
 /// Line fit robust to outliers: least squares, then Huber-reweighted iterations with the
-/// MAD scale of the residuals. Returns `(intercept, slope)`.
-pub fn robust_line(x: &[f64], y: &[f64]) -> (f64, f64) {
+/// MAD scale of the residuals. Returns `(intercept, slope)`, or `None` when `x` does not vary.
+pub fn robust_line(x: &[f64], y: &[f64]) -> Option<(f64, f64)> {
     let mut weights = vec![1.0; x.len()];
-    let mut line = weighted_line(x, y, &weights);
+    let mut line = weighted_line(x, y, &weights)?;
     for _ in 0..10 {
         let residuals: Vec<f64> = x
             .iter()
@@ -62,11 +77,14 @@ pub fn robust_line(x: &[f64], y: &[f64]) -> (f64, f64) {
             break;
         }
         for (w, r) in weights.iter_mut().zip(&residuals) {
-            *w = huber_weight(r / scale, 1.345);
+            *w = huber_weight(r / scale, HUBER_K);
         }
-        line = weighted_line(x, y, &weights);
+        match weighted_line(x, y, &weights) {
+            Some(refined) => line = refined,
+            None => break,
+        }
     }
-    line
+    Some(line)
 }
 
 /// Root mean square; 0 for an empty slice.
@@ -116,7 +134,7 @@ mod tests {
             .collect();
         y[10] += 50.0;
         y[60] -= 80.0;
-        let (a, b) = robust_line(&x, &y);
+        let (a, b) = robust_line(&x, &y).unwrap();
         assert!((a - 2.0).abs() < 0.02 && (b - 0.5).abs() < 1e-3, "{a} {b}");
     }
 
@@ -124,6 +142,13 @@ mod tests {
     fn median_and_scale() {
         assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(&mut [4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&mut []).is_nan());
         assert!((robust_scale(&[1.0, 2.0, 3.0, 4.0, 100.0]) - 1.4826).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_line_needs_varying_x() {
+        assert_eq!(weighted_line(&[2.0, 2.0], &[1.0, 3.0], &[1.0, 1.0]), None);
+        assert_eq!(robust_line(&[2.0, 2.0, 2.0], &[1.0, 3.0, 4.0]), None);
     }
 }

@@ -4,7 +4,7 @@
 
 use crate::error::Problem;
 
-use super::robot::{Measured, PosesRobot};
+use crate::robot_toml::poses::{Measured, PosesRobot};
 
 /// Prefix of the joint columns: `joint.<URDF joint name>`.
 pub(crate) const JOINT_PREFIX: &str = "joint.";

@@ -9,7 +9,7 @@ use super::header::{
     PosesHeader, TargetColumns, INDEX, JOINT_PREFIX, ORIENTATION_STD, POSITION, POSITION_STD,
     QUATERNION, SEQUENCE, SETUP, TEMPERATURE,
 };
-use super::robot::{Measured, PosesRobot};
+use crate::robot_toml::poses::{Measured, PosesRobot};
 use super::{PoseRow, PosesRecording, TargetMeasurement, UNIT_QUATERNION_TOLERANCE};
 use crate::error::{Problem, RecordingError};
 

@@ -136,7 +136,7 @@ fn fit_gear_ratios(
     for j in 0..5 {
         let x: Vec<f64> = motor.iter().map(|m| m[j]).collect();
         let y: Vec<f64> = joints.iter().map(|q| q[j]).collect();
-        let (_, slope) = robust_line(&x, &y);
+        let slope = robust_line(&x, &y).map_or(f64::NAN, |(_, slope)| slope);
         if !slope.is_finite() || slope == 0.0 {
             return Err(failure(format!(
                 "gear ratio of joint {} is not determined",

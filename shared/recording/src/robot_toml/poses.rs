@@ -1,4 +1,5 @@
-//! `robot.toml` of a poses-v1 recording: the URDF and the measured targets.
+//! `robot.toml` of a poses-v1 recording (`format = "poses-v1"`): the URDF and the measured
+//! targets.
 
 use serde::{Deserialize, Serialize};
 
