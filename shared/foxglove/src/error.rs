@@ -13,30 +13,30 @@ pub enum McapExportError {
     #[error(transparent)]
     Recording(#[from] RecordingError),
     /// A parameter file (`robot.toml` or a calibrated `params.toml`) is invalid.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Params {
         /// The file.
         path: PathBuf,
         /// What is wrong.
-        source: ParamsError,
+        cause: ParamsError,
     },
     /// A file could not be created, read or written.
-    #[error("{path}: cannot {action}: {source}")]
+    #[error("{path}: cannot {action}: {cause}")]
     Io {
         /// The file.
         path: PathBuf,
         /// What was being done.
         action: &'static str,
         /// The cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The MCAP library refused a record.
-    #[error("{path}: MCAP: {source}")]
+    #[error("{path}: MCAP: {cause}")]
     Mcap {
         /// The MCAP file.
         path: PathBuf,
         /// The cause.
-        source: mcap::McapError,
+        cause: mcap::McapError,
     },
     /// A time stamp is negative: MCAP log times are unsigned.
     #[error("{what} t_ns = {t_ns}: negative time stamps cannot be MCAP log times")]
@@ -60,13 +60,13 @@ pub enum McapExportError {
     #[error("{0}")]
     NoJointOffsets(String),
     /// The forward kinematics has no solution for an encoder sample.
-    #[error("{what} t_ns = {t_ns}: forward kinematics: {source}")]
+    #[error("{what} t_ns = {t_ns}: forward kinematics: {cause}")]
     Kinematics {
         /// Which row (file and position).
         what: String,
         /// The sample's time stamp (ns).
         t_ns: i64,
         /// Why.
-        source: KinematicsError,
+        cause: KinematicsError,
     },
 }

@@ -11,11 +11,8 @@ use sabr_recording::{Recording, TrackerRow, ROBOT_TOML};
 
 use crate::error::McapExportError;
 use crate::history::homing_offsets;
-use crate::stream::{SessionStream, StreamOptions};
+use crate::stream::{SessionStream, StreamOptions, HOMING_PHASE};
 use crate::writer::{McapSink, Topic};
-
-/// The phase whose dwell at the mechanical stops sets the nominal joint offsets.
-const HOMING_PHASE: &str = "homing";
 
 /// Which model places the robot's frames.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,15 +35,15 @@ pub struct ExportSummary {
 
 /// Reads a calibrated `params.toml`; it must have joint offsets.
 pub fn read_calibrated_params(path: &Path) -> Result<RobotParams, McapExportError> {
-    let text = std::fs::read_to_string(path).map_err(|source| McapExportError::Io {
+    let text = std::fs::read_to_string(path).map_err(|cause| McapExportError::Io {
         path: path.to_path_buf(),
         action: "read",
-        source,
+        cause,
     })?;
     let params =
-        RobotParams::from_toml_str(&text).map_err(|source| McapExportError::Params {
+        RobotParams::from_toml_str(&text).map_err(|cause| McapExportError::Params {
             path: path.to_path_buf(),
-            source,
+            cause,
         })?;
     if params.joints.offset.is_none() {
         return Err(McapExportError::NoJointOffsets(format!(
@@ -74,10 +71,10 @@ pub fn export_recording(
         ExportModel::Nominal => (nominal_params(recording)?, StreamOptions::default()),
         ExportModel::Calibrated(params) => (params.clone(), StreamOptions { residuals: true }),
     };
-    let file = File::create_new(out).map_err(|source| McapExportError::Io {
+    let file = File::create_new(out).map_err(|cause| McapExportError::Io {
         path: out.to_path_buf(),
         action: "create (it must not exist yet)",
-        source,
+        cause,
     })?;
     let sink = McapSink::new(BufWriter::new(file), out)?;
     let mut stream = SessionStream::new(sink, params, options);
@@ -114,10 +111,10 @@ pub fn export_recording(
     let messages = stream.message_counts();
     let mut output = stream.finish()?;
     let io_error = |action| {
-        move |source| McapExportError::Io {
+        move |cause| McapExportError::Io {
             path: out.to_path_buf(),
             action,
-            source,
+            cause,
         }
     };
     output.flush().map_err(io_error("write"))?;
@@ -135,10 +132,10 @@ pub fn export_recording(
 /// The recording's `robot.toml` with the joint offsets of its homing phase (if it has none).
 fn nominal_params(recording: &Recording) -> Result<RobotParams, McapExportError> {
     let toml_path = recording.dir.join(ROBOT_TOML);
-    let mut params = RobotParams::from_toml_str(&recording.robot_toml).map_err(|source| {
+    let mut params = RobotParams::from_toml_str(&recording.robot_toml).map_err(|cause| {
         McapExportError::Params {
             path: toml_path,
-            source,
+            cause,
         }
     })?;
     if params.joints.offset.is_some() {

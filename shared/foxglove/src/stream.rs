@@ -11,7 +11,7 @@ use sabr_recording::{EncoderRow, PhaseRow, Tool, ToolReading, TrackerRow};
 
 use crate::error::McapExportError;
 use crate::frames::{self, TRACKER};
-use crate::history::EncoderHistory;
+use crate::history::{homing_offsets, EncoderHistory};
 use crate::messages::{
     Color, FrameTransforms, JointState, LinePrimitive, Log, MarkerResidual, PoseInFrame,
     SceneEntity, SceneUpdate, SpherePrimitive, Time, ToolResidual, Vector3,
@@ -21,6 +21,8 @@ use crate::writer::{McapSink, Topic};
 /// How far back encoder samples are kept: longer than a homing dwell and than any tracker
 /// latency (ns).
 const HISTORY_NS: i64 = 120_000_000_000;
+/// The phase whose dwell at the mechanical stops sets the nominal joint offsets.
+pub const HOMING_PHASE: &str = "homing";
 /// Foxglove's `LogLevel` INFO.
 const LOG_INFO: u8 = 2;
 /// Diameter of the spheres drawn at the gimbal centres and the tip (m).
@@ -36,6 +38,7 @@ pub struct StreamOptions {
 }
 
 /// Writes a session's rows as MCAP messages ([`Topic`]), each at its time stamp.
+#[derive(Debug)]
 pub struct SessionStream<W: Write + Seek> {
     sink: McapSink<W>,
     params: RobotParams,
@@ -118,10 +121,10 @@ impl<W: Write + Seek> SessionStream<W> {
             self.sink.write(Topic::RobotScene, t, &self.scene(time))?;
         }
         let (_, transforms) = frames::robot_transforms(&self.params, &q, time).map_err(
-            |source| McapExportError::Kinematics {
+            |cause| McapExportError::Kinematics {
                 what: what(),
                 t_ns: row.t_ns,
-                source,
+                cause,
             },
         )?;
         self.sink
@@ -161,8 +164,16 @@ impl<W: Write + Seek> SessionStream<W> {
         Ok(())
     }
 
-    /// Writes one phase as a `/phases` log line at its end.
+    /// Writes one phase as a `/phases` log line at its end. A `homing` phase sets the joint
+    /// offsets from the encoder samples of its dwell at the stops when the model has none
+    /// (so a live stream shows the robot from then on).
     pub fn phase(&mut self, row: &PhaseRow) -> Result<(), McapExportError> {
+        if !self.has_offsets() && row.phase == HOMING_PHASE {
+            let during = self.history.between(row.t_start_ns, row.t_end_ns);
+            if let Some(offsets) = homing_offsets(&self.params, during) {
+                self.set_offsets(offsets);
+            }
+        }
         let t = log_time(row.t_end_ns, || format!("phases.csv phase {:?}", row.phase))?;
         let seconds = (row.t_end_ns - row.t_start_ns) as f64 * 1e-9;
         let log = Log {

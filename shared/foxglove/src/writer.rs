@@ -108,9 +108,9 @@ impl<W: Write + Seek> McapSink<W> {
             .library(concat!("sabr-foxglove ", env!("CARGO_PKG_VERSION")))
             .compression(Some(mcap::Compression::Zstd))
             .create(output)
-            .map_err(|source| McapExportError::Mcap {
+            .map_err(|cause| McapExportError::Mcap {
                 path: path.clone(),
-                source,
+                cause,
             })?;
         Ok(McapSink {
             path,
@@ -153,7 +153,7 @@ impl<W: Write + Seek> McapSink<W> {
         };
         self.writer
             .write_to_known_channel(&header, &data)
-            .map_err(|source| self.mcap_error(source))?;
+            .map_err(|cause| self.mcap_error(cause))?;
         channel.sequence += 1;
         channel.last_ns = Some(t_ns);
         self.channels.insert(topic, channel);
@@ -165,14 +165,14 @@ impl<W: Write + Seek> McapSink<W> {
     pub fn flush(&mut self) -> Result<(), McapExportError> {
         self.writer
             .flush()
-            .map_err(|source| self.mcap_error(source))
+            .map_err(|cause| self.mcap_error(cause))
     }
 
     /// Writes the summary and footer and returns the output.
     pub fn finish(mut self) -> Result<W, McapExportError> {
         self.writer
             .finish()
-            .map_err(|source| self.mcap_error(source))?;
+            .map_err(|cause| self.mcap_error(cause))?;
         Ok(self.writer.into_inner())
     }
 
@@ -187,7 +187,7 @@ impl<W: Write + Seek> McapSink<W> {
                 let id = self
                     .writer
                     .add_schema(schema.name, SCHEMA_ENCODING, &schema.bytes())
-                    .map_err(|source| self.mcap_error(source))?;
+                    .map_err(|cause| self.mcap_error(cause))?;
                 self.schemas.insert(schema.name, id);
                 id
             }
@@ -200,7 +200,7 @@ impl<W: Write + Seek> McapSink<W> {
                 MESSAGE_ENCODING,
                 &BTreeMap::new(),
             )
-            .map_err(|source| self.mcap_error(source))?;
+            .map_err(|cause| self.mcap_error(cause))?;
         let channel = Channel {
             id,
             sequence: 0,
@@ -210,10 +210,19 @@ impl<W: Write + Seek> McapSink<W> {
         Ok(channel)
     }
 
-    fn mcap_error(&self, source: mcap::McapError) -> McapExportError {
+    fn mcap_error(&self, cause: mcap::McapError) -> McapExportError {
         McapExportError::Mcap {
             path: self.path.clone(),
-            source,
+            cause,
         }
+    }
+}
+
+impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McapSink")
+            .field("path", &self.path)
+            .field("messages", &self.message_counts())
+            .finish_non_exhaustive()
     }
 }
