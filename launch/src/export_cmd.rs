@@ -69,5 +69,12 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
     for (topic, count) in &summary.messages {
         println!("  {:<22} {:>8} messages  {}", topic.name(), count, topic.schema().name);
     }
+    if let Some(medians) = summary.median_residual_mm {
+        let shown = medians.map(|m| m.map_or("–".to_owned(), |m| format!("{m:.3} mm")));
+        println!(
+            "median residual of the calibrated model: front {}, back {}, tip {}",
+            shown[0], shown[1], shown[2]
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }

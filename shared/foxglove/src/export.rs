@@ -31,6 +31,9 @@ pub struct ExportSummary {
     pub messages: BTreeMap<Topic, u32>,
     /// Tracker frames of the recording (groups of rows with one frame counter and stamp).
     pub tracker_frames: usize,
+    /// With a calibrated model: the median residual distance (mm) of the front marker, the
+    /// back marker and the tip (`None` for a tool never seen).
+    pub median_residual_mm: Option<[Option<f64>; 3]>,
 }
 
 /// Reads a calibrated `params.toml`; it must have joint offsets.
@@ -109,6 +112,9 @@ pub fn export_recording(
         }
     }
     let messages = stream.message_counts();
+    let median_residual_mm = options
+        .residuals
+        .then(|| stream.median_residual_mm());
     let mut output = stream.finish()?;
     let io_error = |action| {
         move |cause| McapExportError::Io {
@@ -126,6 +132,7 @@ pub fn export_recording(
     Ok(ExportSummary {
         messages,
         tracker_frames: frames.len(),
+        median_residual_mm,
     })
 }
 

@@ -49,6 +49,8 @@ pub struct SessionStream<W: Write + Seek> {
     motion: JointMotion,
     robot_started: bool,
     encoder_rows: u64,
+    /// Residual distances written so far (mm): front, back, tip.
+    residual_mm: [Vec<f64>; 3],
 }
 
 impl<W: Write + Seek> SessionStream<W> {
@@ -70,6 +72,7 @@ impl<W: Write + Seek> SessionStream<W> {
             motion: JointMotion::default(),
             robot_started: false,
             encoder_rows: 0,
+            residual_mm: Default::default(),
         }
     }
 
@@ -160,6 +163,13 @@ impl<W: Write + Seek> SessionStream<W> {
         if self.options.residuals {
             let residual = self.residual(rows, first, time);
             self.sink.write(Topic::Residual, t, &residual)?;
+            for (distances, tool) in self
+                .residual_mm
+                .iter_mut()
+                .zip([residual.front, residual.back, residual.tip])
+            {
+                distances.extend(tool.map(|tool| tool.distance_mm));
+            }
         }
         Ok(())
     }
@@ -188,6 +198,15 @@ impl<W: Write + Seek> SessionStream<W> {
             line: 0,
         };
         self.sink.write(Topic::Phases, t, &log)
+    }
+
+    /// The median residual distance (mm) of the front marker, the back marker and the tip
+    /// over the residuals written so far (`None` for a tool without any).
+    pub fn median_residual_mm(&self) -> [Option<f64>; 3] {
+        self.residual_mm.clone().map(|mut distances| {
+            distances.sort_by(f64::total_cmp);
+            distances.get(distances.len() / 2).copied()
+        })
     }
 
     /// Hands every message written so far to the output (see [`McapSink::flush`]).
