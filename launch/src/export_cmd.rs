@@ -52,7 +52,9 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
     let recording = Recording::read(&args.recording)
         .with_context(|| format!("cannot read the recording {}", args.recording.display()))?;
     let model = match &args.calibration {
-        Some(dir) => ExportModel::Calibrated(read_calibrated_params(&dir.join("params.toml"))?),
+        Some(dir) => {
+            ExportModel::Calibrated(Box::new(read_calibrated_params(&dir.join("params.toml"))?))
+        }
         None => ExportModel::Nominal,
     };
     let summary = export_recording(&recording, &model, &args.out)?;
@@ -67,7 +69,12 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
         recording.phases.len()
     );
     for (topic, count) in &summary.messages {
-        println!("  {:<22} {:>8} messages  {}", topic.name(), count, topic.schema().name);
+        println!(
+            "  {:<22} {:>8} messages  {}",
+            topic.name(),
+            count,
+            topic.schema().name
+        );
     }
     if let Some(medians) = summary.median_residual_mm {
         let shown = medians.map(|m| m.map_or("–".to_owned(), |m| format!("{m:.3} mm")));

@@ -41,7 +41,14 @@ fn a_calibrated_export_has_small_residuals_and_a_bad_calibration_dir_is_named() 
     let rec = dir.path().join("rec");
     let cal = dir.path().join("cal");
     let (ok, _, stderr) = run(&[
-        "sim", "record", "--out", arg(&rec), "--seed", "11", "--duration-scale", "0.3",
+        "sim",
+        "record",
+        "--out",
+        arg(&rec),
+        "--seed",
+        "11",
+        "--duration-scale",
+        "0.3",
     ]);
     assert!(ok, "{stderr}");
     let (ok, _, stderr) = run(&["calibrate", arg(&rec), "--out", arg(&cal)]);
@@ -57,11 +64,20 @@ fn a_calibrated_export_has_small_residuals_and_a_bad_calibration_dir_is_named() 
 
     let calibrated = dir.path().join("calibrated.mcap");
     let (ok, stdout, stderr) = run(&[
-        "export", "mcap", arg(&rec), "--out", arg(&calibrated), "--calibration", arg(&cal),
+        "export",
+        "mcap",
+        arg(&rec),
+        "--out",
+        arg(&calibrated),
+        "--calibration",
+        arg(&cal),
     ]);
     assert!(ok, "{stderr}");
     let frames = printed_before(&stdout, "tracker frames");
-    assert_eq!(printed_count(&stdout, "/calibration/residual"), Some(frames));
+    assert_eq!(
+        printed_count(&stdout, "/calibration/residual"),
+        Some(frames)
+    );
 
     let bytes = std::fs::read(&calibrated).unwrap();
     let mut front: Vec<f64> = Vec::new();
@@ -76,14 +92,23 @@ fn a_calibrated_export_has_small_residuals_and_a_bad_calibration_dir_is_named() 
         }
     }
     front.sort_by(f64::total_cmp);
-    assert!(front.len() as u64 * 10 > frames * 8, "{} of {frames}", front.len());
+    assert!(
+        front.len() as u64 * 10 > frames * 8,
+        "{} of {frames}",
+        front.len()
+    );
     let median = front[front.len() / 2];
     // The tracker's 0.25 mm RMS noise per axis: a calibrated model leaves about that.
     assert!(median < 0.8, "median front residual {median} mm");
 
     let (ok, _, stderr) = run(&[
-        "export", "mcap", arg(&rec), "--out", arg(&dir.path().join("x.mcap")),
-        "--calibration", arg(&rec),
+        "export",
+        "mcap",
+        arg(&rec),
+        "--out",
+        arg(&dir.path().join("x.mcap")),
+        "--calibration",
+        arg(&rec),
     ]);
     assert!(!ok);
     assert!(stderr.contains("params.toml"), "{stderr}");

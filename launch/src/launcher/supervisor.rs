@@ -1,9 +1,9 @@
 //! Starting, watching, restarting and stopping the node processes of a graph.
 
-use crate::progress::Progress;
 use super::placement::Prepared;
 use super::run_dir::RunDir;
 use super::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
+use crate::progress::Progress;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_node::msgs::LifecycleState;
@@ -202,10 +202,11 @@ impl<'a> Supervisor<'a> {
 
     /// Prints a progress line with the time since launch.
     pub fn say(&self, message: std::fmt::Arguments<'_>) {
-        self.progress
-            .line(format_args!("[{:8.3}] {message}", self.t0.elapsed().as_secs_f64()));
+        self.progress.line(format_args!(
+            "[{:8.3}] {message}",
+            self.t0.elapsed().as_secs_f64()
+        ));
     }
-
 
     /// One supervision step: wait a little, read lifecycle messages, look after every node.
     fn tick(&mut self) -> Result<(), StopReason> {
@@ -459,7 +460,10 @@ fn echo_lines(
         for line in std::io::BufReader::new(out).lines() {
             let Ok(line) = line else { break };
             let _ = writeln!(log, "{line}");
-            progress.line(format_args!("[{:8.3}] {node}: {line}", t0.elapsed().as_secs_f64()));
+            progress.line(format_args!(
+                "[{:8.3}] {node}: {line}",
+                t0.elapsed().as_secs_f64()
+            ));
             progress.set_message(format_args!("{node}: {line}"));
         }
     })

@@ -23,11 +23,11 @@ use monitor::Monitor;
 use report::{Goals, Outcome, SoakCsv};
 use sabr::launcher::describe;
 use sabr::launcher::spec;
+use sabr::progress::Progress;
 use sabr_node::Domain;
 use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use sabr::progress::Progress;
 use std::time::{Duration, Instant};
 
 /// Arguments of `sabr soak`.

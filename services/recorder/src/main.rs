@@ -129,6 +129,9 @@ fn run(args: &Args) -> anyhow::Result<()> {
             .context("the robot model for the MCAP stream")?;
         recorder = recorder.with_mcap(&dir.join(MCAP_FILE), params)?;
     }
+    if let Some(path) = recorder.mcap_path() {
+        tracing::info!(mcap = %path.display(), "also writing the session as MCAP");
+    }
     tracing::info!(dir = %dir.display(), flush_ms = args.flush_ms, "recording");
 
     let stall = Duration::from_millis(args.stall_ms.max(1));

@@ -1,9 +1,9 @@
 //! The live streams turned into recording rows (docs/robot-model.md §7) and written as they come.
 
-use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
-use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
 use sabr_foxglove::{McapExportError, McapSink, SessionStream, StreamOptions};
 use sabr_model::RobotParams;
+use sabr_msgs::rows::{encoder_row, phase_row, tracker_rows};
+use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
 use sabr_recording::{FlushPolicy, RecordingError, RecordingWriter, TrackerRow};
 use std::fs::File;
 use std::io::BufWriter;
@@ -116,7 +116,7 @@ impl Recorder {
         let written = self.writer.write_encoder(&row);
         self.count(written)?;
         self.stats.encoder_rows += 1;
-        self.to_mcap(|mcap| mcap.encoder(&row));
+        self.forward_to_mcap(|mcap| mcap.encoder(&row));
         Ok(continuity)
     }
 
@@ -135,7 +135,7 @@ impl Recorder {
             }
         }
         self.stats.tracker_frames += 1;
-        self.to_mcap(|mcap| mcap.tracker_frame(&accepted));
+        self.forward_to_mcap(|mcap| mcap.tracker_frame(&accepted));
         first_error.map_or(Ok(()), Err)
     }
 
@@ -145,13 +145,13 @@ impl Recorder {
         let written = self.writer.write_phase(&row);
         self.count(written)?;
         self.stats.phase_rows += 1;
-        self.to_mcap(|mcap| mcap.phase(&row));
+        self.forward_to_mcap(|mcap| mcap.phase(&row));
         Ok(())
     }
 
     /// Hands every buffered row to the operating system.
     pub fn flush(&mut self) -> Result<(), RecordingError> {
-        self.to_mcap(SessionStream::flush);
+        self.forward_to_mcap(SessionStream::flush);
         self.writer.flush()
     }
 
@@ -180,7 +180,10 @@ impl Recorder {
 
     /// Passes a row to the MCAP stream. A refused message is counted and logged; any other
     /// MCAP error is logged and ends the MCAP stream (the CSV recording goes on).
-    fn to_mcap(&mut self, write: impl FnOnce(&mut LiveMcap) -> Result<(), McapExportError>) {
+    fn forward_to_mcap(
+        &mut self,
+        write: impl FnOnce(&mut LiveMcap) -> Result<(), McapExportError>,
+    ) {
         let Some((mcap, path)) = &mut self.mcap else {
             return;
         };
@@ -376,7 +379,11 @@ mod tests {
         let topics = mcap_topics(&path);
         let count = |topic: &str| topics.get(topic).map_or(0, |(n, _)| *n);
         assert_eq!(count("/robot/joint_states"), 15);
-        assert_eq!(count("/robot/tf"), 5, "robot frames once homing set the offsets");
+        assert_eq!(
+            count("/robot/tf"),
+            5,
+            "robot frames once homing set the offsets"
+        );
         assert_eq!(count("/robot/tf_static"), 1);
         assert_eq!(count("/tracker/tf"), 1);
         assert_eq!(count("/tracker/tip"), 1);

@@ -21,7 +21,7 @@ pub enum ExportModel {
     Nominal,
     /// A calibrated model (a `params.toml` with joint offsets): the residual per tracker frame
     /// is written too.
-    Calibrated(RobotParams),
+    Calibrated(Box<RobotParams>),
 }
 
 /// What an export wrote.
@@ -43,11 +43,10 @@ pub fn read_calibrated_params(path: &Path) -> Result<RobotParams, McapExportErro
         action: "read",
         cause,
     })?;
-    let params =
-        RobotParams::from_toml_str(&text).map_err(|cause| McapExportError::Params {
-            path: path.to_path_buf(),
-            cause,
-        })?;
+    let params = RobotParams::from_toml_str(&text).map_err(|cause| McapExportError::Params {
+        path: path.to_path_buf(),
+        cause,
+    })?;
     if params.joints.offset.is_none() {
         return Err(McapExportError::NoJointOffsets(format!(
             "{}: field `joints.joint_offset`: missing; a calibrated params.toml has the joint offsets",
@@ -72,7 +71,7 @@ pub fn export_recording(
 ) -> Result<ExportSummary, McapExportError> {
     let (params, options) = match model {
         ExportModel::Nominal => (nominal_params(recording)?, StreamOptions::default()),
-        ExportModel::Calibrated(params) => (params.clone(), StreamOptions { residuals: true }),
+        ExportModel::Calibrated(params) => ((**params).clone(), StreamOptions { residuals: true }),
     };
     let file = File::create_new(out).map_err(|cause| McapExportError::Io {
         path: out.to_path_buf(),
@@ -112,9 +111,7 @@ pub fn export_recording(
         }
     }
     let messages = stream.message_counts();
-    let median_residual_mm = options
-        .residuals
-        .then(|| stream.median_residual_mm());
+    let median_residual_mm = options.residuals.then(|| stream.median_residual_mm());
     let mut output = stream.finish()?;
     let io_error = |action| {
         move |cause| McapExportError::Io {

@@ -6,7 +6,7 @@
 use std::io::{Seek, Write};
 
 use nalgebra::Point3;
-use sabr_model::{DirectionTracker, Joints, JointMotion, RobotParams, DIRECTION_DEAD_BAND_COUNTS};
+use sabr_model::{DirectionTracker, JointMotion, Joints, RobotParams, DIRECTION_DEAD_BAND_COUNTS};
 use sabr_recording::{EncoderRow, PhaseRow, Tool, ToolReading, TrackerRow};
 
 use crate::error::McapExportError;
@@ -105,7 +105,10 @@ impl<W: Write + Seek> SessionStream<W> {
         let time = Time::from_ns(t);
         self.history.push(*row);
         self.motion = self.directions.update(&row.counts.map(|c| c as f64));
-        let joints = self.params.joints_from_counts(&row.counts, &self.motion).ok();
+        let joints = self
+            .params
+            .joints_from_counts(&row.counts, &self.motion)
+            .ok();
         let state = JointState {
             timestamp: time,
             name: ["theta1", "theta2", "theta3", "theta4", "theta5"],
@@ -123,13 +126,14 @@ impl<W: Write + Seek> SessionStream<W> {
                 .write(Topic::RobotTfStatic, t, &FrameTransforms { transforms })?;
             self.sink.write(Topic::RobotScene, t, &self.scene(time))?;
         }
-        let (_, transforms) = frames::robot_transforms(&self.params, &q, time).map_err(
-            |cause| McapExportError::Kinematics {
-                what: what(),
-                t_ns: row.t_ns,
-                cause,
-            },
-        )?;
+        let (_, transforms) =
+            frames::robot_transforms(&self.params, &q, time).map_err(|cause| {
+                McapExportError::Kinematics {
+                    what: what(),
+                    t_ns: row.t_ns,
+                    cause,
+                }
+            })?;
         self.sink
             .write(Topic::RobotTf, t, &FrameTransforms { transforms })
     }
@@ -163,10 +167,10 @@ impl<W: Write + Seek> SessionStream<W> {
         if self.options.residuals {
             let residual = self.residual(rows, first, time);
             self.sink.write(Topic::Residual, t, &residual)?;
-            for (distances, tool) in self
-                .residual_mm
-                .iter_mut()
-                .zip([residual.front, residual.back, residual.tip])
+            for (distances, tool) in
+                self.residual_mm
+                    .iter_mut()
+                    .zip([residual.front, residual.back, residual.tip])
             {
                 distances.extend(tool.map(|tool| tool.distance_mm));
             }
@@ -381,8 +385,5 @@ impl<W: Write + Seek> SessionStream<W> {
 
 /// `t_ns` as an MCAP log time; `what` names the row in the error for a negative one.
 fn log_time(t_ns: i64, what: impl FnOnce() -> String) -> Result<u64, McapExportError> {
-    u64::try_from(t_ns).map_err(|_| McapExportError::NegativeTime {
-        what: what(),
-        t_ns,
-    })
+    u64::try_from(t_ns).map_err(|_| McapExportError::NegativeTime { what: what(), t_ns })
 }

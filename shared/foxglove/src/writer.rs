@@ -163,9 +163,7 @@ impl<W: Write + Seek> McapSink<W> {
     /// Ends the current chunk and hands it to `output`, so a reader (or a recovery tool) sees
     /// every message written so far even if the process dies before [`McapSink::finish`].
     pub fn flush(&mut self) -> Result<(), McapExportError> {
-        self.writer
-            .flush()
-            .map_err(|cause| self.mcap_error(cause))
+        self.writer.flush().map_err(|cause| self.mcap_error(cause))
     }
 
     /// Writes the summary and footer and returns the output.
@@ -194,12 +192,7 @@ impl<W: Write + Seek> McapSink<W> {
         };
         let id = self
             .writer
-            .add_channel(
-                schema_id,
-                topic.name(),
-                MESSAGE_ENCODING,
-                &BTreeMap::new(),
-            )
+            .add_channel(schema_id, topic.name(), MESSAGE_ENCODING, &BTreeMap::new())
             .map_err(|cause| self.mcap_error(cause))?;
         let channel = Channel {
             id,

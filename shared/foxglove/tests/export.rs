@@ -27,8 +27,11 @@ struct Read {
     json: Value,
 }
 
+/// Per topic: schema name, schema encoding, message encoding.
+type Channels = BTreeMap<String, (String, String, String)>;
+
 /// Every message of `path`, with the schema name and encodings of each topic.
-fn read_mcap(path: &Path) -> (Vec<Read>, BTreeMap<String, (String, String, String)>) {
+fn read_mcap(path: &Path) -> (Vec<Read>, Channels) {
     let bytes = std::fs::read(path).unwrap();
     let mut channels = BTreeMap::new();
     let mut messages = Vec::new();
@@ -67,7 +70,7 @@ fn nominal_export_reads_back_with_one_message_per_sample_in_time_order() {
     let summary = export_recording(&recording, &ExportModel::Nominal, &out).unwrap();
     let (messages, channels) = read_mcap(&out);
 
-    let expected: BTreeMap<String, (String, String, String)> = [
+    let expected: Channels = [
         (Topic::TrackerTf, "foxglove.FrameTransforms"),
         (Topic::TrackerTip, "foxglove.PoseInFrame"),
         (Topic::RobotTfStatic, "foxglove.FrameTransforms"),
@@ -79,10 +82,16 @@ fn nominal_export_reads_back_with_one_message_per_sample_in_time_order() {
     .into_iter()
     .map(|(topic, schema)| {
         let encodings = ("jsonschema".to_owned(), "json".to_owned());
-        (topic.name().to_owned(), (schema.to_owned(), encodings.0, encodings.1))
+        (
+            topic.name().to_owned(),
+            (schema.to_owned(), encodings.0, encodings.1),
+        )
     })
     .collect();
-    assert_eq!(channels, expected, "no residual channel without a calibration");
+    assert_eq!(
+        channels, expected,
+        "no residual channel without a calibration"
+    );
 
     let frames = sabr_foxglove::export::tracker_frames(&recording.tracker).len();
     let tips = recording
@@ -91,7 +100,10 @@ fn nominal_export_reads_back_with_one_message_per_sample_in_time_order() {
         .filter(|row| matches!(row.reading, ToolReading::Point { .. }))
         .count();
     assert!(tips > 0 && frames > 100, "{tips} tips, {frames} frames");
-    assert_eq!(count(&messages, Topic::JointStates), recording.encoders.len());
+    assert_eq!(
+        count(&messages, Topic::JointStates),
+        recording.encoders.len()
+    );
     assert_eq!(count(&messages, Topic::RobotTf), recording.encoders.len());
     assert_eq!(count(&messages, Topic::TrackerTf), frames);
     assert_eq!(count(&messages, Topic::TrackerTip), tips);
@@ -117,7 +129,10 @@ fn nominal_export_reads_back_with_one_message_per_sample_in_time_order() {
         .map(|m| m.log_time)
         .collect();
     let encoder_times: Vec<u64> = recording.encoders.iter().map(|r| r.t_ns as u64).collect();
-    assert_eq!(joint_times, encoder_times, "log time = the sample's time stamp");
+    assert_eq!(
+        joint_times, encoder_times,
+        "log time = the sample's time stamp"
+    );
 
     let first_state = messages
         .iter()
@@ -161,7 +176,7 @@ fn with_the_true_model_the_frames_and_residuals_match_the_tracker_to_its_noise()
         ..CalibrationInfo::default()
     });
     let out = dir.path().join("true.mcap");
-    export_recording(&recording, &ExportModel::Calibrated(params), &out).unwrap();
+    export_recording(&recording, &ExportModel::Calibrated(Box::new(params)), &out).unwrap();
     let (messages, channels) = read_mcap(&out);
     assert_eq!(channels[Topic::Residual.name()].0, "sabr.MarkerResidual");
 
@@ -173,7 +188,10 @@ fn with_the_true_model_the_frames_and_residuals_match_the_tracker_to_its_noise()
     assert_eq!(residuals.len(), frames.len());
     let mut front_seen = 0;
     for (residual, rows) in residuals.iter().zip(&frames) {
-        assert_eq!(residual.json["frame"].as_u64().unwrap(), u64::from(rows[0].frame));
+        assert_eq!(
+            residual.json["frame"].as_u64().unwrap(),
+            u64::from(rows[0].frame)
+        );
         let front_measured = rows
             .iter()
             .any(|r| r.tool == Tool::Front && r.reading != ToolReading::Missing);
@@ -195,7 +213,11 @@ fn with_the_true_model_the_frames_and_residuals_match_the_tracker_to_its_noise()
         assert!(distance < 2.0, "frame {}: {distance} mm", rows[0].frame);
         assert!(angle < 1.0, "frame {}: {angle} deg", rows[0].frame);
     }
-    assert!(front_seen * 10 > frames.len() * 8, "{front_seen} of {}", frames.len());
+    assert!(
+        front_seen * 10 > frames.len() * 8,
+        "{front_seen} of {}",
+        frames.len()
+    );
 
     // The model chain tracker → base_marker → robot_base → front_effector → front_marker
     // lands on the measured front marker.
@@ -244,9 +266,15 @@ fn an_existing_file_is_not_overwritten_and_a_recording_without_homing_is_refused
     assert_eq!(std::fs::read(&out).unwrap(), b"keep");
 
     recording.phases.retain(|phase| phase.phase != "homing");
-    let error =
-        export_recording(&recording, &ExportModel::Nominal, &dir.path().join("new.mcap"))
-            .unwrap_err()
-            .to_string();
-    assert!(error.contains("phases.csv") && error.contains("homing"), "{error}");
+    let error = export_recording(
+        &recording,
+        &ExportModel::Nominal,
+        &dir.path().join("new.mcap"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        error.contains("phases.csv") && error.contains("homing"),
+        "{error}"
+    );
 }
