@@ -84,3 +84,57 @@ pub fn homing_offsets<'a>(
         params.joints.home_stops[j] - params.joints.gear_ratio[j] * motor[j]
     }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(t_ns: i64, count: i64) -> EncoderRow {
+        EncoderRow {
+            t_ns,
+            counts: [count, -count, 2 * count, 0, 7],
+        }
+    }
+
+    #[test]
+    fn counts_are_interpolated_between_samples_and_unknown_outside() {
+        let mut history = EncoderHistory::new(1_000);
+        history.push(row(100, 10));
+        history.push(row(200, 20));
+        assert_eq!(history.counts_at(150), Some([15.0, -15.0, 30.0, 0.0, 7.0]));
+        assert_eq!(history.counts_at(200), Some([20.0, -20.0, 40.0, 0.0, 7.0]));
+        assert_eq!(history.counts_at(99), None);
+        assert_eq!(history.counts_at(201), None);
+    }
+
+    #[test]
+    fn samples_older_than_the_span_are_forgotten() {
+        let mut history = EncoderHistory::new(100);
+        for t in [0, 50, 100, 150] {
+            history.push(row(t, t));
+        }
+        let kept: Vec<i64> = history
+            .between(i64::MIN, i64::MAX)
+            .map(|r| r.t_ns)
+            .collect();
+        assert_eq!(kept, [50, 100, 150]);
+        assert_eq!(history.counts_at(25), None);
+    }
+
+    #[test]
+    fn homing_offsets_put_the_median_counts_at_the_nominal_stops() {
+        let params = RobotParams::nominal();
+        // One outlier sample does not move the median.
+        let rows = [row(0, 400), row(1, 400), row(2, 9_999)];
+        let offsets = homing_offsets(&params, rows.iter()).unwrap();
+        let mut with_offsets = params.clone();
+        with_offsets.joints.offset = Some(offsets);
+        let q = with_offsets
+            .joints_from_counts(&rows[0].counts, &Default::default())
+            .unwrap();
+        for (joint, stop) in q.iter().zip(params.joints.home_stops) {
+            assert!((joint - stop).abs() < 1e-12, "{joint} vs {stop}");
+        }
+        assert_eq!(homing_offsets(&params, [].iter()), None);
+    }
+}

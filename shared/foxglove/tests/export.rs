@@ -49,10 +49,22 @@ fn read_mcap(path: &Path) -> (Vec<Read>, Channels) {
                 channel.message_encoding.clone(),
             ),
         );
+        let json: Value = serde_json::from_slice(&message.data).unwrap();
+        let keys = |object: &Value| -> Vec<String> {
+            let mut keys: Vec<String> = object.as_object().unwrap().keys().cloned().collect();
+            keys.sort();
+            keys
+        };
+        assert_eq!(
+            keys(&json),
+            keys(&schema_json["properties"]),
+            "{}: the message has exactly the schema's fields",
+            channel.topic
+        );
         messages.push(Read {
             topic: channel.topic.clone(),
             log_time: message.log_time,
-            json: serde_json::from_slice(&message.data).unwrap(),
+            json,
         });
     }
     (messages, channels)
