@@ -82,13 +82,8 @@ impl<W: Write + Seek> SessionStream<W> {
     }
 
     /// Sets the joint offsets θ_off (rad) from now on.
-    pub fn set_offsets(&mut self, offsets: Joints) {
+    fn set_offsets(&mut self, offsets: Joints) {
         self.params.joints.offset = Some(offsets);
-    }
-
-    /// The recent encoder samples.
-    pub fn history(&self) -> &EncoderHistory {
-        &self.history
     }
 
     /// Messages written per topic so far.
@@ -224,7 +219,9 @@ impl<W: Write + Seek> SessionStream<W> {
     }
 
     /// The model against one tracker frame, at its exposure (arrival minus the calibrated
-    /// latency), relative to the base marker.
+    /// latency, counts interpolated between the encoder samples around it), relative to the
+    /// base marker. The backlash direction is the one at the latest encoder sample, a few tens
+    /// of ms later: it differs only right at a reversal.
     fn residual(&self, rows: &[TrackerRow], first: &TrackerRow, time: Time) -> MarkerResidual {
         let mut residual = MarkerResidual {
             timestamp: time,

@@ -44,18 +44,6 @@ pub enum Topic {
 }
 
 impl Topic {
-    /// Every topic.
-    pub const ALL: [Topic; 8] = [
-        Topic::TrackerTf,
-        Topic::TrackerTip,
-        Topic::RobotTfStatic,
-        Topic::RobotTf,
-        Topic::JointStates,
-        Topic::RobotScene,
-        Topic::Phases,
-        Topic::Residual,
-    ];
-
     /// The topic name.
     pub fn name(self) -> &'static str {
         match self {
