@@ -2,3 +2,4 @@
 //! integration tests.
 
 pub mod launcher;
+pub mod progress;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 mod bench;
 mod calibrate_cmd;
+mod export_cmd;
 mod import_cmd;
 mod kinematics_cmd;
 mod out_dir;
@@ -39,6 +40,8 @@ enum Command {
     Import(import_cmd::ImportArgs),
     /// Soak: run the sensing graph for minutes; lost encoder samples, rates, memory, CPU.
     Soak(soak::SoakArgs),
+    /// Export a recording for other tools: `sabr export mcap` (Foxglove).
+    Export(export_cmd::ExportArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -52,6 +55,7 @@ fn main() -> std::process::ExitCode {
         Command::Calibrate(args) => calibrate_cmd::run(&args),
         Command::Import(args) => import_cmd::run(&args),
         Command::Soak(args) => soak::run(&args),
+        Command::Export(args) => export_cmd::run(&args),
     };
     match result {
         Ok(code) => code,

@@ -25,6 +25,7 @@ mod uds;
 use anyhow::bail;
 use cpu::CpuShare;
 use payload::{Payload, Transport};
+use sabr::progress::Progress;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::path::{Path, PathBuf};
@@ -77,6 +78,8 @@ struct Settings {
     sensing: sensing::Plan,
     setpoints: setpoints::Plan,
     bin_dir: PathBuf,
+    /// The spinner naming what is being measured (on a terminal only).
+    progress: Progress,
 }
 
 impl Settings {
@@ -116,11 +119,18 @@ impl Settings {
                 setpoints: (samples / 10).max(10),
             },
             bin_dir,
+            progress: Progress::spinner(),
         })
     }
 
     fn runs(&self, part: Part) -> bool {
         self.parts.contains(&part)
+    }
+
+    /// Prints `measuring <what> ...` and shows it beside the spinner.
+    fn measuring(&self, what: impl std::fmt::Display) {
+        self.progress.line(format_args!("measuring {what} ..."));
+        self.progress.set_message(format_args!("measuring {what}"));
     }
 }
 
@@ -181,6 +191,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     if settings.runs(Part::Hops) {
         run_hops(&settings, &out, &mut results);
     }
+    settings.progress.finish();
     let hop_rows = hops::ratio_rows(&results.measurements, "failed: see the error above");
 
     output::write_hgrm_files(&out, &results.measurements)?;
@@ -229,7 +240,7 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
     for transport in Transport::ALL {
         for payload in Payload::ALL {
             let name = payload::baseline_name(transport, payload);
-            eprintln!("measuring {name} ...");
+            settings.measuring(&name);
             let measured = pingpong::run(
                 transport,
                 payload,
@@ -275,11 +286,11 @@ fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
                 });
             results.add_graph(&format!("{graph} graph"), measured);
         };
-    eprintln!("measuring the sensing graph: hops, matching error, IK round trips, CPU ...");
+    settings.measuring("the sensing graph: hops, matching error, IK round trips, CPU");
     in_domain("sensing", &|domain| {
         sensing::run(&settings.sensing, &dir, &settings.bin_dir, domain)
     });
-    eprintln!("measuring the setpoint graph: setpoint → rig, CPU ...");
+    settings.measuring("the setpoint graph: setpoint → rig, CPU");
     in_domain("setpoints", &|domain| {
         setpoints::run(&settings.setpoints, &dir, &settings.bin_dir, domain)
     });
@@ -288,7 +299,7 @@ fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
 /// Kinematics per solve, then `sim record` and calibration of that recording in `out/work`
 /// (removed afterwards).
 fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
-    eprintln!("measuring compute/fk and compute/ik ...");
+    settings.measuring("compute/fk and compute/ik");
     let kinematics = compute::kinematics(settings.kinematics_batches);
     if let Ok([fk, ik]) = &kinematics {
         let ik_median = ik.summary().p50;
@@ -312,7 +323,7 @@ fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
 
     let work = out.join("work");
     let session = work.join("session");
-    eprintln!("measuring compute/sim-record ...");
+    settings.measuring("compute/sim-record");
     let recorded = compute::sim_record(&session, settings.session_scale);
     let recorded_ok = recorded.is_ok();
     results.add(
@@ -321,7 +332,7 @@ fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
     );
     let calibrate_name = format!("compute/calibrate-x{}", settings.session_scale);
     if recorded_ok {
-        eprintln!("measuring {calibrate_name} ...");
+        settings.measuring(&calibrate_name);
         let calibrated = compute::calibration(&session, &work.join("calibration"), &calibrate_name);
         results.add(&calibrate_name, calibrated.map(|m| vec![m]));
     } else {

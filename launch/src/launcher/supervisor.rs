@@ -3,6 +3,7 @@
 use super::placement::Prepared;
 use super::run_dir::RunDir;
 use super::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
+use crate::progress::Progress;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_node::msgs::LifecycleState;
@@ -89,6 +90,8 @@ pub struct Supervisor<'a> {
     t0: Instant,
     stop_at: Option<Instant>,
     done: Option<String>,
+    /// The spinner with the session's latest news (on a terminal only).
+    progress: Progress,
 }
 
 impl<'a> Supervisor<'a> {
@@ -124,6 +127,7 @@ impl<'a> Supervisor<'a> {
             t0,
             stop_at: duration.map(|d| t0 + d),
             done: None,
+            progress: Progress::spinner(),
         })
     }
 
@@ -193,11 +197,15 @@ impl<'a> Supervisor<'a> {
                 "removed the resources of {removed} dead node(s)"
             ));
         }
+        self.progress.finish();
     }
 
     /// Prints a progress line with the time since launch.
     pub fn say(&self, message: std::fmt::Arguments<'_>) {
-        eprintln!("[{:8.3}] {message}", self.t0.elapsed().as_secs_f64());
+        self.progress.line(format_args!(
+            "[{:8.3}] {message}",
+            self.t0.elapsed().as_secs_f64()
+        ));
     }
 
     /// One supervision step: wait a little, read lifecycle messages, look after every node.
@@ -433,24 +441,30 @@ impl<'a> Supervisor<'a> {
         let echo = child
             .stdout
             .take()
-            .map(|out| echo_lines(out, log, spec.name.clone(), self.t0));
+            .map(|out| echo_lines(out, log, spec.name.clone(), self.t0, self.progress.clone()));
         Ok((child, echo))
     }
 }
 
 /// Copies a console node's stdout line by line to its log and to the launcher's terminal
-/// (`[time] node: line`), until the node closes it.
+/// (`[time] node: line`), until the node closes it. Its latest line is also the progress
+/// display's message (the calibrator's phase and session lines, for example).
 fn echo_lines(
     out: ChildStdout,
     mut log: std::fs::File,
     node: String,
     t0: Instant,
+    progress: Progress,
 ) -> JoinHandle<()> {
     std::thread::spawn(move || {
         for line in std::io::BufReader::new(out).lines() {
             let Ok(line) = line else { break };
             let _ = writeln!(log, "{line}");
-            eprintln!("[{:8.3}] {node}: {line}", t0.elapsed().as_secs_f64());
+            progress.line(format_args!(
+                "[{:8.3}] {node}: {line}",
+                t0.elapsed().as_secs_f64()
+            ));
+            progress.set_message(format_args!("{node}: {line}"));
         }
     })
 }

@@ -23,6 +23,7 @@ use monitor::Monitor;
 use report::{Goals, Outcome, SoakCsv};
 use sabr::launcher::describe;
 use sabr::launcher::spec;
+use sabr::progress::Progress;
 use sabr_node::Domain;
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -254,6 +255,8 @@ fn watch(
     let mut next_read = t0;
     let mut next_progress = t0 + PROGRESS_PERIOD;
     let mut window_start: Option<Instant> = None;
+    let progress = Progress::bar(plan.window.as_secs(), "s measured");
+    progress.set_message("starting the graph");
     let early_end = loop {
         monitor.read_streams(Duration::from_millis(5))?;
         monitor.poll_lifecycle()?;
@@ -270,7 +273,7 @@ fn watch(
         if now >= next_progress {
             next_progress += PROGRESS_PERIOD;
             let s = monitor.streams();
-            eprintln!(
+            progress.line(format_args!(
                 "[{:6.0} s] encoder samples {} (lost {}), tracker frames {}, matched {}, RSS of all {:.1} MiB{}",
                 (now - t0).as_secs_f64(),
                 s.encoders.received,
@@ -279,17 +282,22 @@ fn watch(
                 s.matched.received,
                 monitor.total_rss_kib() as f64 / 1024.0,
                 if window_start.is_none() { " (starting)" } else { "" }
-            );
+            ));
+            progress.set_message(format_args!("{} encoder samples lost", s.encoders.lost));
+        }
+        if let Some(start) = window_start {
+            progress.set_position((now - start).as_secs());
         }
         if window_over {
             break None;
         }
         if window_start.is_none() {
             if monitor.all_ready(nodes.iter().map(String::as_str)) {
-                eprintln!(
+                progress.line(format_args!(
                     "sabr soak: all nodes ready after {:.1} s; measuring",
                     (now - t0).as_secs_f64()
-                );
+                ));
+                progress.set_message("measuring");
                 window_start = Some(now);
                 monitor.start_window();
             } else if now - t0 > plan.ready_timeout {
@@ -309,6 +317,7 @@ fn watch(
             break Some("interrupted".to_owned());
         }
     };
+    progress.finish();
     Ok(Live {
         t0,
         window_start,

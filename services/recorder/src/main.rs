@@ -5,7 +5,8 @@
 //! (→ `tracker.csv`, one row per tool), and `sabr/motion/phases` and `sabr/rig/phases`
 //! (→ `phases.csv`). Rows reach the operating system at least every `--flush-ms`, so a
 //! recorder killed with SIGKILL leaves a recording readable up to its last complete row; on
-//! SIGINT/SIGTERM every file is flushed and synced to disk.
+//! SIGINT/SIGTERM every file is flushed and synced to disk. With `--mcap` the same rows also
+//! go to `session.mcap` (Foxglove), finished with its index on a clean stop.
 
 mod recorder;
 
@@ -33,11 +34,17 @@ struct Args {
     /// About the longest time a written row stays in the recorder's buffers, ms.
     #[arg(long, value_name = "MS", default_value_t = 50)]
     flush_ms: u64,
+    /// Also write the session as MCAP for Foxglove to DIR/session.mcap (robot frames from the
+    /// end of homing on; topics in docs/robot-model.md §8).
+    #[arg(long)]
+    mcap: bool,
     /// Warn when no encoder sample or tracker frame arrives for this long, ms.
     #[arg(long, value_name = "MS", default_value_t = 500)]
     stall_ms: u64,
 }
 
+/// The MCAP file's name inside the recording directory (with `--mcap`).
+const MCAP_FILE: &str = "session.mcap";
 /// Longest sleep of the loop without data.
 const IDLE: Duration = Duration::from_millis(20);
 /// How often the counters are logged.
@@ -118,6 +125,14 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let rig_phases = rt.subscriber::<PhaseMark>(services::RIG_PHASES)?;
     let mut recorder = Recorder::create(&dir, &toml, FlushPolicy::Interval(flush_every))
         .with_context(|| format!("cannot start the recording in {}", dir.display()))?;
+    if args.mcap {
+        let params = sabr_model::RobotParams::from_toml_str(&toml)
+            .context("the robot model for the MCAP stream")?;
+        recorder = recorder.with_mcap(&dir.join(MCAP_FILE), params)?;
+    }
+    if let Some(path) = recorder.mcap_path() {
+        tracing::info!(mcap = %path.display(), "also writing the session as MCAP");
+    }
     tracing::info!(dir = %dir.display(), flush_ms = args.flush_ms, "recording");
 
     let stall = Duration::from_millis(args.stall_ms.max(1));
