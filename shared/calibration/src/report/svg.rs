@@ -106,7 +106,11 @@ fn axes<'a, 'b>(
     (x_low, x_high): (f64, f64),
     (y_low, y_high): (f64, f64),
 ) -> Result<
-    ChartContext<'a, SVGBackend<'b>, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>,
+    ChartContext<
+        'a,
+        SVGBackend<'b>,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
     DrawingAreaErrorKind<std::io::Error>,
 > {
     let mut chart = ChartBuilder::on(root)
@@ -240,7 +244,10 @@ pub fn histogram(
         let normal: Vec<(f64, f64)> = (0..=200)
             .map(|k| {
                 let v = x_low + (x_high - x_low) * f64::from(k) / 200.0;
-                (v, (-0.5 * v * v).exp() / (2.0 * std::f64::consts::PI).sqrt())
+                (
+                    v,
+                    (-0.5 * v * v).exp() / (2.0 * std::f64::consts::PI).sqrt(),
+                )
             })
             .collect();
         chart
@@ -259,7 +266,7 @@ pub fn histogram(
         }
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(SeriesLabelPosition::UpperLeft)
             .label_font((FONT, 10))
             .background_style(WHITE.mix(0.8))
             .draw()
