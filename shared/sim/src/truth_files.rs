@@ -9,7 +9,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use sabr_model::RobotParams;
+use sabr_model::{read_params_file, ParamsFileError};
 use sabr_recording::{write_all, Recording};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -230,12 +230,18 @@ impl Truth {
     /// Reads a truth directory written by [`Truth::write_dir`].
     pub fn read_dir(dir: &Path) -> Result<Truth, SimError> {
         let params_path = dir.join(PARAMS_FILE);
-        let params =
-            RobotParams::from_toml_str(&read(&params_path)?).map_err(|e| SimError::TruthFile {
-                path: params_path.clone(),
-                line: 0,
-                reason: e.to_string(),
-            })?;
+        let params = read_params_file(&params_path).map_err(|error| match error {
+            ParamsFileError::Read { path, source } => SimError::Io {
+                path,
+                action: "read",
+                source,
+            },
+            ParamsFileError::Invalid { path, line, source } => SimError::TruthFile {
+                path,
+                line: line.map_or(0, |l| l as u64),
+                reason: source.to_string(),
+            },
+        })?;
         let effects_path = dir.join(EFFECTS_FILE);
         let file: EffectsFile =
             toml::from_str(&read(&effects_path)?).map_err(|e| SimError::TruthFile {
