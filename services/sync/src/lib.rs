@@ -2,8 +2,9 @@
 //! state at the frame's exposure time.
 //!
 //! - [`clock::FrameClock`]: online robust line through the tracker's frame counter and the host
-//!   arrival stamps (sliding window, Huber IRLS; robust to skipped frames, counter steps ≠ 1,
-//!   jitter and late frames). `exposure = line − latency`, the same definition of the latency
+//!   arrival stamps: the engine's clock line (`sabr_calibration::data::clock::ClockLine`,
+//!   Huber IRLS; robust to skipped frames, counter steps ≠ 1, jitter and late frames) over a
+//!   sliding window. `exposure = line − latency`, the same definition of the latency
 //!   as the calibrator's.
 //! - [`latency::LatencySetting`]: the configured latency (`--latency-ms`) until a parameter set
 //!   with a calibrated latency is announced; every matched sample says which was used.

@@ -106,7 +106,12 @@ fn live_matched_exposures_agree_with_the_offline_time_sync() {
         .frames
         .iter()
         .enumerate()
-        .map(|(index, frame)| (frame.frame, offline.exposure_ns(index, latency_ns as f64 * 1e-9)))
+        .map(|(index, frame)| {
+            (
+                frame.frame,
+                offline.exposure_ns(index, latency_ns as f64 * 1e-9),
+            )
+        })
         .collect();
     let encoders = EncoderTrack::new(&recording.encoders, MAX_ENCODER_GAP_NS).expect("encoders");
 
@@ -135,9 +140,15 @@ fn live_matched_exposures_agree_with_the_offline_time_sync() {
          largest {largest:.0} ns",
         compared.len()
     );
-    assert!(largest <= MAX_DIFFERENCE_NS, "largest difference {largest} ns");
+    assert!(
+        largest <= MAX_DIFFERENCE_NS,
+        "largest difference {largest} ns"
+    );
     assert!(p99 <= P99_DIFFERENCE_NS, "p99 difference {p99} ns");
-    assert!(mean.abs() <= MEAN_DIFFERENCE_NS, "mean difference {mean} ns");
+    assert!(
+        mean.abs() <= MEAN_DIFFERENCE_NS,
+        "mean difference {mean} ns"
+    );
 
     for (sample, _) in &compared {
         let expected = encoders

@@ -1,8 +1,8 @@
 //! The IK answer to one request, with the parameter set in service.
 
 use crate::parameter_set::ParameterSet;
-use sabr_model::ParamsFileError;
 use nalgebra::{Point3, Vector3};
+use sabr_model::ParamsFileError;
 use sabr_model::{inverse, JointMotion, KinematicsError};
 use sabr_msgs::{FixedString, IkRequest, IkResponse, IkStatus, ParameterSetAnnouncement};
 use std::path::Path;

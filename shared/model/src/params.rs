@@ -160,7 +160,12 @@ fn line_of_field(text: &str, field: &str) -> Option<usize> {
     for (index, raw) in text.lines().enumerate() {
         let line = raw.trim();
         if let Some(name) = line.strip_prefix('[') {
-            current = name.trim_start_matches('[').split(']').next().unwrap_or("").trim();
+            current = name
+                .trim_start_matches('[')
+                .split(']')
+                .next()
+                .unwrap_or("")
+                .trim();
             if current == path {
                 return Some(index + 1);
             }

@@ -100,7 +100,11 @@ mod tests {
         });
         let text = params.to_toml_string();
         let (line, message) = invalid(&text);
-        let expected = text.lines().position(|l| l.starts_with("latency_ms")).unwrap() + 1;
+        let expected = text
+            .lines()
+            .position(|l| l.starts_with("latency_ms"))
+            .unwrap()
+            + 1;
         assert_eq!(line, Some(expected), "{message}");
         assert!(message.contains("calibration.latency_ms"), "{message}");
     }

@@ -1,15 +1,17 @@
 //! The truth on disk, `DIR/truth/`: `params.toml` (true model), `effects.toml` (effects,
 //! tracker truth incl. latency and `T_S_M`, stops, power-up pose), `validation.csv` (true tip
 //! at each validation hold) and `frames.csv` (exposure and arrival of every tracker frame).
-//! Every file is created new: nothing is overwritten.
+//! Every file is created new: nothing is overwritten. The CSV files are written and read
+//! with `csv` + serde, one row struct per file.
 
 use std::fs::{self, File};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use sabr_model::RobotParams;
+use sabr_model::{read_params_file, ParamsFileError};
 use sabr_recording::{write_all, Recording};
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::effect_spec::SimEffect;
@@ -24,8 +26,104 @@ const PARAMS_FILE: &str = "params.toml";
 const EFFECTS_FILE: &str = "effects.toml";
 const VALIDATION_FILE: &str = "validation.csv";
 const FRAMES_FILE: &str = "frames.csv";
-const VALIDATION_HEADER: &str = "t_start_ns,t_end_ns,x,y,z,ux,uy,uz,q1,q2,q3,q4,q5,c1,c2,c3,c4,c5";
-const FRAMES_HEADER: &str = "frame,exposure_t_ns,arrival_t_ns";
+
+/// One row of `validation.csv`: a validation hold, its true tip (mm, `Bb`), needle direction,
+/// joints (rad) and counts.
+#[derive(Debug, Serialize, Deserialize)]
+struct ValidationRow {
+    t_start_ns: i64,
+    t_end_ns: i64,
+    x: f64,
+    y: f64,
+    z: f64,
+    ux: f64,
+    uy: f64,
+    uz: f64,
+    q1: f64,
+    q2: f64,
+    q3: f64,
+    q4: f64,
+    q5: f64,
+    c1: i64,
+    c2: i64,
+    c3: i64,
+    c4: i64,
+    c5: i64,
+}
+
+/// The columns of `validation.csv`, in order.
+const VALIDATION_COLUMNS: [&str; 18] = [
+    "t_start_ns",
+    "t_end_ns",
+    "x",
+    "y",
+    "z",
+    "ux",
+    "uy",
+    "uz",
+    "q1",
+    "q2",
+    "q3",
+    "q4",
+    "q5",
+    "c1",
+    "c2",
+    "c3",
+    "c4",
+    "c5",
+];
+
+impl From<&ValidationTruth> for ValidationRow {
+    fn from(v: &ValidationTruth) -> Self {
+        let [q1, q2, q3, q4, q5] = v.joints;
+        let [c1, c2, c3, c4, c5] = v.counts;
+        ValidationRow {
+            t_start_ns: v.t_start_ns,
+            t_end_ns: v.t_end_ns,
+            x: v.tip.x,
+            y: v.tip.y,
+            z: v.tip.z,
+            ux: v.direction.x,
+            uy: v.direction.y,
+            uz: v.direction.z,
+            q1,
+            q2,
+            q3,
+            q4,
+            q5,
+            c1,
+            c2,
+            c3,
+            c4,
+            c5,
+        }
+    }
+}
+
+impl From<ValidationRow> for ValidationTruth {
+    fn from(r: ValidationRow) -> Self {
+        ValidationTruth {
+            t_start_ns: r.t_start_ns,
+            t_end_ns: r.t_end_ns,
+            tip: Point3::new(r.x, r.y, r.z),
+            direction: Vector3::new(r.ux, r.uy, r.uz),
+            joints: [r.q1, r.q2, r.q3, r.q4, r.q5],
+            counts: [r.c1, r.c2, r.c3, r.c4, r.c5],
+        }
+    }
+}
+
+/// One row of `frames.csv`: a tracker frame's exposure and arrival (host ns; no arrival for
+/// a dropped frame).
+#[derive(Debug, Serialize, Deserialize)]
+struct FrameRow {
+    frame: u32,
+    exposure_t_ns: i64,
+    arrival_t_ns: Option<i64>,
+}
+
+/// The columns of `frames.csv`, in order.
+const FRAMES_COLUMNS: [&str; 3] = ["frame", "exposure_t_ns", "arrival_t_ns"];
 
 #[derive(Debug, Serialize, Deserialize)]
 struct EffectsFile {
@@ -82,14 +180,6 @@ fn triple(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
-fn join<T: ToString>(values: impl IntoIterator<Item = T>) -> String {
-    values
-        .into_iter()
-        .map(|v| v.to_string())
-        .collect::<Vec<_>>()
-        .join(",")
-}
-
 impl Truth {
     /// Writes the truth into `dir` (made if absent); refuses to overwrite existing files.
     pub fn write_dir(&self, dir: &Path) -> Result<(), SimError> {
@@ -123,41 +213,35 @@ impl Truth {
             .map_err(|e| SimError::Config(format!("cannot serialise the truth: {e}")))?;
         create_new(&dir.join(EFFECTS_FILE), &text)?;
 
-        let mut csv = String::from(VALIDATION_HEADER);
-        csv.push('\n');
-        for v in &self.validation {
-            let numbers = [v.tip.x, v.tip.y, v.tip.z]
-                .into_iter()
-                .chain(triple(&v.direction))
-                .chain(v.joints);
-            csv.push_str(&format!(
-                "{},{},{},{}\n",
-                v.t_start_ns,
-                v.t_end_ns,
-                join(numbers),
-                join(v.counts)
-            ));
-        }
-        create_new(&dir.join(VALIDATION_FILE), &csv)?;
-
-        let mut csv = String::from(FRAMES_HEADER);
-        csv.push('\n');
-        for f in &self.frames {
-            let arrival = f.arrival_ns.map_or(String::new(), |t| t.to_string());
-            csv.push_str(&format!("{},{},{arrival}\n", f.frame, f.exposure_ns));
-        }
-        create_new(&dir.join(FRAMES_FILE), &csv)
+        write_csv(
+            &dir.join(VALIDATION_FILE),
+            self.validation.iter().map(ValidationRow::from),
+        )?;
+        write_csv(
+            &dir.join(FRAMES_FILE),
+            self.frames.iter().map(|f| FrameRow {
+                frame: f.frame,
+                exposure_t_ns: f.exposure_ns,
+                arrival_t_ns: f.arrival_ns,
+            }),
+        )
     }
 
     /// Reads a truth directory written by [`Truth::write_dir`].
     pub fn read_dir(dir: &Path) -> Result<Truth, SimError> {
         let params_path = dir.join(PARAMS_FILE);
-        let params =
-            RobotParams::from_toml_str(&read(&params_path)?).map_err(|e| SimError::TruthFile {
-                path: params_path.clone(),
-                line: 0,
-                reason: e.to_string(),
-            })?;
+        let params = read_params_file(&params_path).map_err(|error| match error {
+            ParamsFileError::Read { path, source } => SimError::Io {
+                path,
+                action: "read",
+                source,
+            },
+            ParamsFileError::Invalid { path, line, source } => SimError::TruthFile {
+                path,
+                line: line.map_or(0, |l| l as u64),
+                reason: source.to_string(),
+            },
+        })?;
         let effects_path = dir.join(EFFECTS_FILE);
         let file: EffectsFile =
             toml::from_str(&read(&effects_path)?).map_err(|e| SimError::TruthFile {
@@ -201,8 +285,18 @@ impl Truth {
             effects,
             tracker,
             host_start_ns: file.host_start_ns,
-            validation: read_validation(&dir.join(VALIDATION_FILE))?,
-            frames: read_frames(&dir.join(FRAMES_FILE))?,
+            validation: read_csv::<ValidationRow>(&dir.join(VALIDATION_FILE), &VALIDATION_COLUMNS)?
+                .into_iter()
+                .map(ValidationTruth::from)
+                .collect(),
+            frames: read_csv::<FrameRow>(&dir.join(FRAMES_FILE), &FRAMES_COLUMNS)?
+                .into_iter()
+                .map(|r| FrameTruth {
+                    frame: r.frame,
+                    exposure_ns: r.exposure_t_ns,
+                    arrival_ns: r.arrival_t_ns,
+                })
+                .collect(),
         })
     }
 }
@@ -211,101 +305,63 @@ fn read(path: &Path) -> Result<String, SimError> {
     fs::read_to_string(path).map_err(io_error(path, "read"))
 }
 
-/// The data lines of a CSV file with their 1-based line numbers, after checking the header.
-fn csv_lines(path: &Path, header: &str) -> Result<Vec<(u64, Vec<String>)>, SimError> {
-    let text = read(path)?;
-    let mut lines = text.lines();
-    if lines.next() != Some(header) {
+/// Writes `rows` as a new CSV file at `path`, with the header of the row struct.
+fn write_csv<T: Serialize>(path: &Path, rows: impl IntoIterator<Item = T>) -> Result<(), SimError> {
+    let file = File::create_new(path).map_err(io_error(path, "create"))?;
+    let mut writer = csv::Writer::from_writer(BufWriter::new(file));
+    for row in rows {
+        writer.serialize(row).map_err(|e| csv_error(path, &[], e))?;
+    }
+    writer.flush().map_err(io_error(path, "write"))
+}
+
+/// Every row of the CSV file at `path`, after checking its header is `columns`.
+fn read_csv<T: DeserializeOwned>(path: &Path, columns: &[&str]) -> Result<Vec<T>, SimError> {
+    let file = File::open(path).map_err(io_error(path, "read"))?;
+    let mut reader = csv::Reader::from_reader(std::io::BufReader::new(file));
+    let header = reader.headers().map_err(|e| csv_error(path, columns, e))?;
+    if !header.iter().eq(columns.iter().copied()) {
         return Err(SimError::TruthFile {
             path: path.to_path_buf(),
             line: 1,
-            reason: format!("expected the header `{header}`"),
+            reason: format!("expected the header `{}`", columns.join(",")),
         });
     }
-    let width = header.split(',').count();
-    lines
-        .enumerate()
-        .map(|(index, line)| {
-            let number = index as u64 + 2;
-            let fields: Vec<String> = line.split(',').map(str::to_string).collect();
-            if fields.len() < width {
-                return Err(SimError::TruthFile {
-                    path: path.to_path_buf(),
-                    line: number,
-                    reason: format!("expected {width} fields, found {}", fields.len()),
-                });
-            }
-            Ok((number, fields))
-        })
+    reader
+        .deserialize()
+        .map(|row| row.map_err(|e| csv_error(path, columns, e)))
         .collect()
 }
 
-fn field<T: std::str::FromStr>(
-    path: &Path,
-    line: u64,
-    fields: &[String],
-    index: usize,
-    header: &str,
-) -> Result<T, SimError> {
-    fields[index].parse().map_err(|_| SimError::TruthFile {
+/// A CSV error as a [`SimError`] naming the file, the line and the column.
+fn csv_error(path: &Path, columns: &[&str], error: csv::Error) -> SimError {
+    let line = error.position().map_or(0, csv::Position::line);
+    let message = error.to_string();
+    let reason = match error.into_kind() {
+        csv::ErrorKind::Io(source) => {
+            return SimError::Io {
+                path: path.to_path_buf(),
+                action: "read or write",
+                source,
+            }
+        }
+        csv::ErrorKind::Deserialize { err, .. } => {
+            let column = err
+                .field()
+                .and_then(|index| columns.get(index as usize))
+                .map_or(String::new(), |name| format!("field `{name}`: "));
+            format!("{column}{}", err.kind())
+        }
+        csv::ErrorKind::UnequalLengths {
+            expected_len, len, ..
+        } => format!("expected {expected_len} fields, found {len}"),
+        _ => message,
+    };
+    SimError::TruthFile {
         path: path.to_path_buf(),
         line,
-        reason: format!(
-            "field `{}` = `{}` is not a valid number",
-            header.split(',').nth(index).unwrap_or("?"),
-            fields[index]
-        ),
-    })
-}
-
-fn read_validation(path: &Path) -> Result<Vec<ValidationTruth>, SimError> {
-    let get =
-        |line, fields: &[String], index| field::<f64>(path, line, fields, index, VALIDATION_HEADER);
-    csv_lines(path, VALIDATION_HEADER)?
-        .into_iter()
-        .map(|(line, fields)| {
-            let int = |index| field::<i64>(path, line, &fields, index, VALIDATION_HEADER);
-            let mut joints = [0.0; 5];
-            let mut counts = [0; 5];
-            for i in 0..5 {
-                joints[i] = get(line, &fields, 8 + i)?;
-                counts[i] = int(13 + i)?;
-            }
-            Ok(ValidationTruth {
-                t_start_ns: int(0)?,
-                t_end_ns: int(1)?,
-                tip: Point3::new(
-                    get(line, &fields, 2)?,
-                    get(line, &fields, 3)?,
-                    get(line, &fields, 4)?,
-                ),
-                direction: Vector3::new(
-                    get(line, &fields, 5)?,
-                    get(line, &fields, 6)?,
-                    get(line, &fields, 7)?,
-                ),
-                joints,
-                counts,
-            })
-        })
-        .collect()
-}
-
-fn read_frames(path: &Path) -> Result<Vec<FrameTruth>, SimError> {
-    csv_lines(path, FRAMES_HEADER)?
-        .into_iter()
-        .map(|(line, fields)| {
-            Ok(FrameTruth {
-                frame: field(path, line, &fields, 0, FRAMES_HEADER)?,
-                exposure_ns: field(path, line, &fields, 1, FRAMES_HEADER)?,
-                arrival_ns: if fields[2].is_empty() {
-                    None
-                } else {
-                    Some(field(path, line, &fields, 2, FRAMES_HEADER)?)
-                },
-            })
-        })
-        .collect()
+        reason,
+    }
 }
 
 /// Writes a recording (format v1) to `dir` and its truth to `dir/truth/`. `dir` must not

@@ -70,9 +70,8 @@ impl ClockLine {
             let Some((new_intercept, new_slope)) = weighted_line(x, y, &weights) else {
                 break;
             };
-            let moved_at = |at: f64| {
-                (new_intercept + new_slope * at - (intercept + slope * at)).abs()
-            };
+            let moved_at =
+                |at: f64| (new_intercept + new_slope * at - (intercept + slope * at)).abs();
             let moved = moved_at(low).max(moved_at(high));
             intercept = new_intercept;
             slope = new_slope;
@@ -164,8 +163,12 @@ impl ClockFit {
                 )
             })?;
         let line = ClockLine::refine(&x, &y, start, OFFLINE_CONVERGED_NS);
-        let mean_residual_ns =
-            x.iter().zip(&y).map(|(xi, yi)| yi - line.at(*xi)).sum::<f64>() / x.len() as f64;
+        let mean_residual_ns = x
+            .iter()
+            .zip(&y)
+            .map(|(xi, yi)| yi - line.at(*xi))
+            .sum::<f64>()
+            / x.len() as f64;
         Ok(Self {
             first_counter: i64::from(counters[0]),
             first_arrival_ns,

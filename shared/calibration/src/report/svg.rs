@@ -1,56 +1,77 @@
-//! Minimal inline SVG charts for the HTML report: scatter plots, a histogram with a density
-//! curve, and horizontal bars. Each chart is a self-contained `<svg>` element.
+//! The SVG charts of the HTML report, drawn with `plotters` (SVG backend): scatter plots, a
+//! histogram with the standard normal density, and horizontal bars. Each chart is a
+//! self-contained `<svg>` element the report embeds inline.
 
-use std::fmt::Write;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-/// Chart size (px) and the inner margins for the axes.
-const WIDTH: f64 = 320.0;
-const HEIGHT: f64 = 220.0;
-const LEFT: f64 = 52.0;
-const RIGHT: f64 = 10.0;
-const TOP: f64 = 24.0;
-const BOTTOM: f64 = 36.0;
+/// Chart size (px).
+const WIDTH: u32 = 320;
+const HEIGHT: u32 = 220;
+/// Font of titles and labels.
+const FONT: &str = "sans-serif";
+/// Colour of the reference normal density.
+const NORMAL_COLOUR: RGBColor = RGBColor(0xcc, 0x00, 0x00);
+/// Colour of the zero line.
+const ZERO_COLOUR: RGBColor = RGBColor(0xcc, 0xcc, 0xcc);
+/// Colour of the bars.
+const BAR_COLOUR: RGBColor = RGBColor(0x4a, 0x7e, 0xbb);
 
-/// A data range mapped onto a pixel range.
-#[derive(Debug, Clone, Copy)]
-struct Axis {
-    low: f64,
-    high: f64,
-    from_px: f64,
-    to_px: f64,
-}
+type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+type Drawn = Result<(), DrawingAreaErrorKind<std::io::Error>>;
 
-impl Axis {
-    fn new(low: f64, high: f64, from_px: f64, to_px: f64) -> Self {
-        let (low, high) = if high > low {
-            (low, high)
-        } else {
-            (low - 1.0, low + 1.0)
-        };
-        Self {
-            low,
-            high,
-            from_px,
-            to_px,
+/// Renders one chart of `size` px to an SVG string. A chart that cannot be drawn becomes an
+/// SVG saying so (with the reason), so a report never silently lacks a plot.
+fn render(size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> Drawn) -> String {
+    let mut out = String::new();
+    let drawn = {
+        let root = SVGBackend::with_string(&mut out, size).into_drawing_area();
+        draw(&root).and_then(|()| root.present())
+    };
+    match drawn {
+        Ok(()) => out.trim_end().to_owned(),
+        Err(error) => {
+            let reason = error
+                .to_string()
+                .replace('&', "&amp;")
+                .replace('<', "&lt;")
+                .replace('>', "&gt;");
+            format!(
+                "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"40\">\
+                 <text x=\"4\" y=\"20\">chart not drawn: {reason}</text></svg>",
+                size.0
+            )
         }
     }
+}
 
-    fn px(&self, value: f64) -> f64 {
-        self.from_px + (value - self.low) / (self.high - self.low) * (self.to_px - self.from_px)
+/// `#rgb` or `#rrggbb` as a colour; black for anything else.
+fn colour(hex: &str) -> RGBColor {
+    let digits = hex.trim_start_matches('#');
+    let channel = |text: &str| u8::from_str_radix(text, 16).ok();
+    let parsed = match digits.len() {
+        3 => digits
+            .chars()
+            .map(|c| channel(&c.to_string()).map(|v| v * 17))
+            .collect::<Option<Vec<u8>>>(),
+        6 => (0..3)
+            .map(|i| channel(&digits[2 * i..2 * i + 2]))
+            .collect::<Option<Vec<u8>>>(),
+        _ => None,
+    };
+    match parsed.as_deref() {
+        Some(&[r, g, b]) => RGBColor(r, g, b),
+        _ => BLACK,
     }
+}
 
-    /// About five round tick values inside the range.
-    fn ticks(&self) -> Vec<f64> {
-        let raw = (self.high - self.low) / 5.0;
-        let magnitude = 10f64.powf(raw.log10().floor());
-        let step = [1.0, 2.0, 5.0, 10.0]
-            .iter()
-            .map(|m| m * magnitude)
-            .find(|s| *s >= raw)
-            .unwrap_or(10.0 * magnitude);
-        let first = (self.low / step).ceil() as i64;
-        let last = (self.high / step + 1e-9).floor() as i64;
-        (first..=last).map(|k| k as f64 * step).collect()
+/// A non-empty range: `(low, high)`, or one unit either side of `low` when it is empty.
+fn nonempty((low, high): (f64, f64)) -> (f64, f64) {
+    if high > low {
+        (low, high)
+    } else {
+        (low - 1.0, low + 1.0)
     }
 }
 
@@ -68,64 +89,49 @@ pub fn padded_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (low - pad, high + pad)
 }
 
-fn escape(text: &str) -> String {
-    text.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
-fn tick_label(value: f64) -> String {
+fn tick_label(value: &f64) -> String {
     let text = format!("{value:.3}");
-    text.trim_end_matches('0').trim_end_matches('.').to_string()
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    match text {
+        "-0" => "0".to_owned(),
+        other => other.to_owned(),
+    }
 }
 
-/// Opens a chart: frame, title, axis labels and ticks.
-fn frame(out: &mut String, title: &str, x_label: &str, y_label: &str, x: &Axis, y: &Axis) {
-    let _ = write!(
-        out,
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{WIDTH}\" height=\"{HEIGHT}\" \
-         viewBox=\"0 0 {WIDTH} {HEIGHT}\" font-family=\"sans-serif\" font-size=\"10\">\
-         <text x=\"{}\" y=\"14\" text-anchor=\"middle\" font-size=\"11\">{}</text>\
-         <rect x=\"{LEFT}\" y=\"{TOP}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>",
-        WIDTH / 2.0,
-        escape(title),
-        WIDTH - LEFT - RIGHT,
-        HEIGHT - TOP - BOTTOM
-    );
-    for t in x.ticks() {
-        let px = x.px(t);
-        let _ = write!(
-            out,
-            "<line x1=\"{px:.1}\" y1=\"{}\" x2=\"{px:.1}\" y2=\"{}\" stroke=\"#888\"/>\
-             <text x=\"{px:.1}\" y=\"{}\" text-anchor=\"middle\">{}</text>",
-            HEIGHT - BOTTOM,
-            HEIGHT - BOTTOM + 4.0,
-            HEIGHT - BOTTOM + 14.0,
-            tick_label(t)
-        );
-    }
-    for t in y.ticks() {
-        let py = y.px(t);
-        let _ = write!(
-            out,
-            "<line x1=\"{}\" y1=\"{py:.1}\" x2=\"{LEFT}\" y2=\"{py:.1}\" stroke=\"#888\"/>\
-             <text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
-            LEFT - 4.0,
-            LEFT - 6.0,
-            py + 3.0,
-            tick_label(t)
-        );
-    }
-    let _ = write!(
-        out,
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\
-         <text transform=\"translate(12 {}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
-        LEFT + (WIDTH - LEFT - RIGHT) / 2.0,
-        HEIGHT - 6.0,
-        escape(x_label),
-        TOP + (HEIGHT - TOP - BOTTOM) / 2.0,
-        escape(y_label)
-    );
+/// A chart with a title, axes with about five round ticks and their labels.
+fn axes<'a, 'b>(
+    root: &'a Area<'b>,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    (x_low, x_high): (f64, f64),
+    (y_low, y_high): (f64, f64),
+) -> Result<
+    ChartContext<
+        'a,
+        SVGBackend<'b>,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    DrawingAreaErrorKind<std::io::Error>,
+> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FONT, 11))
+        .margin(6)
+        .x_label_area_size(30)
+        .y_label_area_size(46)
+        .build_cartesian_2d(x_low..x_high, y_low..y_high)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_labels(5)
+        .y_labels(5)
+        .x_label_formatter(&tick_label)
+        .y_label_formatter(&tick_label)
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .label_style((FONT, 10))
+        .axis_desc_style((FONT, 10))
+        .draw()?;
+    Ok(chart)
 }
 
 /// A scatter plot: points of a few classes (one colour each) and, per class, a line.
@@ -140,7 +146,7 @@ pub struct Scatter<'a> {
     pub points: &'a [(f64, f64, usize)],
     /// Lines (polylines) by class.
     pub lines: &'a [(usize, &'a [(f64, f64)])],
-    /// Colour of each class.
+    /// Colour of each class (`#rrggbb`).
     pub palette: &'a [&'a str],
     /// Horizontal range.
     pub x_range: (f64, f64),
@@ -151,42 +157,37 @@ pub struct Scatter<'a> {
 impl Scatter<'_> {
     /// The chart.
     pub fn render(&self) -> String {
-        let x = Axis::new(self.x_range.0, self.x_range.1, LEFT, WIDTH - RIGHT);
-        let y = Axis::new(self.y_range.0, self.y_range.1, HEIGHT - BOTTOM, TOP);
-        let mut out = String::new();
-        frame(&mut out, self.title, self.x_label, self.y_label, &x, &y);
-        if (y.low..=y.high).contains(&0.0) {
-            let py = y.px(0.0);
-            let _ = write!(
-                out,
-                "<line x1=\"{LEFT}\" y1=\"{py:.1}\" x2=\"{}\" y2=\"{py:.1}\" stroke=\"#ccc\"/>",
-                WIDTH - RIGHT
-            );
+        render((WIDTH, HEIGHT), |root| self.draw(root))
+    }
+
+    fn draw(&self, root: &Area<'_>) -> Drawn {
+        let (x_low, x_high) = nonempty(self.x_range);
+        let (y_low, y_high) = nonempty(self.y_range);
+        let mut chart = axes(
+            root,
+            self.title,
+            (self.x_label, self.y_label),
+            (x_low, x_high),
+            (y_low, y_high),
+        )?;
+        if (y_low..=y_high).contains(&0.0) {
+            chart.draw_series(LineSeries::new([(x_low, 0.0), (x_high, 0.0)], ZERO_COLOUR))?;
         }
-        let colour = |class: usize| self.palette.get(class).copied().unwrap_or("#000");
-        for (px, py, class) in self.points {
-            let _ = write!(
-                out,
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.4\" fill=\"{}\" fill-opacity=\"0.45\"/>",
-                x.px(*px),
-                y.px(py.clamp(y.low, y.high)),
-                colour(*class)
-            );
-        }
+        let class_colour = |class: usize| self.palette.get(class).map_or(BLACK, |c| colour(c));
+        chart.draw_series(self.points.iter().map(|&(x, y, class)| {
+            Circle::new(
+                (x, y.clamp(y_low, y_high)),
+                1.4,
+                class_colour(class).mix(0.45).filled(),
+            )
+        }))?;
         for (class, line) in self.lines {
-            let points: Vec<String> = line
-                .iter()
-                .map(|(a, b)| format!("{:.1},{:.1}", x.px(*a), y.px(b.clamp(y.low, y.high))))
-                .collect();
-            let _ = write!(
-                out,
-                "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"/>",
-                points.join(" "),
-                colour(*class)
-            );
+            chart.draw_series(LineSeries::new(
+                line.iter().map(|&(x, y)| (x, y.clamp(y_low, y_high))),
+                class_colour(*class).stroke_width(2),
+            ))?;
         }
-        out.push_str("</svg>");
-        out
+        Ok(())
     }
 }
 
@@ -194,10 +195,26 @@ impl Scatter<'_> {
 pub struct DensitySeries<'a> {
     /// Legend text.
     pub name: &'a str,
-    /// Stroke colour.
+    /// Stroke colour (`#rrggbb`).
     pub colour: &'a str,
     /// Density of each bin.
     pub density: &'a [f64],
+}
+
+/// The outline of a step histogram over bins `low + k·width`.
+fn steps(low: f64, width: f64, density: &[f64]) -> Vec<(f64, f64)> {
+    let mut points = vec![(low, 0.0)];
+    for (bin, &d) in density.iter().enumerate() {
+        points.push((low + width * bin as f64, d));
+        points.push((low + width * (bin + 1) as f64, d));
+    }
+    points.push((low + width * density.len() as f64, 0.0));
+    points
+}
+
+/// A short legend line in `colour`.
+fn legend_line(colour: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new([(x, y), (x + 14, y)], colour.stroke_width(2))
 }
 
 /// Step histograms of several series over bins `low + k·width`, with the standard normal
@@ -215,101 +232,89 @@ pub fn histogram(
         .iter()
         .flat_map(|s| s.density.iter().copied())
         .fold(0.4f64, f64::max);
-    let x = Axis::new(low, high, LEFT, WIDTH - RIGHT);
-    let y = Axis::new(0.0, peak * 1.05, HEIGHT - BOTTOM, TOP);
-    let mut out = String::new();
-    frame(&mut out, title, x_label, "density", &x, &y);
-    let normal: Vec<String> = (0..=200)
-        .map(|k| {
-            let v = low + (high - low) * k as f64 / 200.0;
-            let d = (-0.5 * v * v).exp() / (2.0 * std::f64::consts::PI).sqrt();
-            format!("{:.1},{:.1}", x.px(v), y.px(d))
-        })
-        .collect();
-    let _ = write!(
-        out,
-        "<polyline points=\"{}\" fill=\"none\" stroke=\"#c00\" stroke-dasharray=\"4 2\"/>",
-        normal.join(" ")
-    );
-    for (k, s) in series.iter().enumerate() {
-        let mut path = format!("M{:.1},{:.1}", x.px(low), y.px(0.0));
-        for (b, d) in s.density.iter().enumerate() {
-            let left = x.px(low + width * b as f64);
-            let right = x.px(low + width * (b + 1) as f64);
-            let top = y.px(*d);
-            let _ = write!(path, " L{left:.1},{top:.1} L{right:.1},{top:.1}");
+    render((WIDTH, HEIGHT), |root| {
+        let (x_low, x_high) = nonempty((low, high));
+        let mut chart = axes(
+            root,
+            title,
+            (x_label, "density"),
+            (x_low, x_high),
+            (0.0, peak * 1.05),
+        )?;
+        let normal: Vec<(f64, f64)> = (0..=200)
+            .map(|k| {
+                let v = x_low + (x_high - x_low) * f64::from(k) / 200.0;
+                (
+                    v,
+                    (-0.5 * v * v).exp() / (2.0 * std::f64::consts::PI).sqrt(),
+                )
+            })
+            .collect();
+        chart
+            .draw_series(DashedLineSeries::new(normal, 4, 2, NORMAL_COLOUR.into()))?
+            .label("N(0,1): tracker noise")
+            .legend(legend_line(NORMAL_COLOUR));
+        for s in series {
+            let stroke = colour(s.colour);
+            chart
+                .draw_series(LineSeries::new(
+                    steps(low, width, s.density),
+                    stroke.stroke_width(2),
+                ))?
+                .label(s.name)
+                .legend(legend_line(stroke));
         }
-        let _ = write!(path, " L{:.1},{:.1}", x.px(high), y.px(0.0));
-        let _ = write!(
-            out,
-            "<path d=\"{path}\" fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\"/>\
-             <text x=\"{}\" y=\"{}\" text-anchor=\"end\" fill=\"{}\">{}</text>",
-            s.colour,
-            WIDTH - RIGHT - 4.0,
-            TOP + 12.0 + 12.0 * k as f64,
-            s.colour,
-            escape(s.name)
-        );
-    }
-    let _ = write!(
-        out,
-        "<text x=\"{}\" y=\"{}\" fill=\"#c00\">N(0,1): tracker noise</text></svg>",
-        LEFT + 4.0,
-        TOP + 12.0
-    );
-    out
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT, 10))
+            .background_style(WHITE.mix(0.8))
+            .draw()
+    })
 }
 
 /// Horizontal bars `(label, value)`; missing values are shown as "–".
 pub fn bars(title: &str, unit: &str, rows: &[(String, Option<f64>)]) -> String {
-    let row_height = 20.0;
-    let label_width = 250.0;
-    let bar_width = 260.0;
-    let height = TOP + row_height * rows.len() as f64 + 10.0;
-    let width = label_width + bar_width + 70.0;
+    const ROW_HEIGHT: i32 = 20;
+    const TOP: i32 = 24;
+    const LABEL_WIDTH: i32 = 250;
+    const BAR_WIDTH: f64 = 260.0;
+    let height = TOP + ROW_HEIGHT * rows.len() as i32 + 10;
+    let width = LABEL_WIDTH + BAR_WIDTH as i32 + 70;
     let peak = rows
         .iter()
         .filter_map(|(_, v)| *v)
         .fold(0.0, f64::max)
         .max(1e-12);
-    let mut out = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width}\" height=\"{height}\" \
-         font-family=\"sans-serif\" font-size=\"11\"><text x=\"4\" y=\"14\">{}</text>",
-        escape(title)
-    );
-    for (k, (label, value)) in rows.iter().enumerate() {
-        let y = TOP + row_height * k as f64;
-        let _ = write!(
-            out,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
-            label_width - 6.0,
-            y + 13.0,
-            escape(label)
-        );
-        match value {
-            Some(v) => {
-                let w = bar_width * v / peak;
-                let _ = write!(
-                    out,
-                    "<rect x=\"{label_width}\" y=\"{:.1}\" width=\"{w:.1}\" height=\"14\" fill=\"#4a7ebb\"/>\
-                     <text x=\"{:.1}\" y=\"{:.1}\">{v:.3} {}</text>",
-                    y + 2.0,
-                    label_width + w + 4.0,
-                    y + 13.0,
-                    escape(unit)
-                );
-            }
-            None => {
-                let _ = write!(
-                    out,
-                    "<text x=\"{label_width}\" y=\"{:.1}\">–</text>",
-                    y + 13.0
-                );
+    render((width as u32, height as u32), |root| {
+        let left = TextStyle::from((FONT, 11)).pos(Pos::new(HPos::Left, VPos::Center));
+        let right = TextStyle::from((FONT, 11)).pos(Pos::new(HPos::Right, VPos::Center));
+        root.draw(&Text::new(title.to_owned(), (4, 10), left.clone()))?;
+        for (k, (label, value)) in rows.iter().enumerate() {
+            let middle = TOP + ROW_HEIGHT * k as i32 + 9;
+            root.draw(&Text::new(
+                label.clone(),
+                (LABEL_WIDTH - 6, middle),
+                right.clone(),
+            ))?;
+            match value {
+                Some(v) => {
+                    let w = (BAR_WIDTH * v / peak).round() as i32;
+                    root.draw(&Rectangle::new(
+                        [(LABEL_WIDTH, middle - 7), (LABEL_WIDTH + w, middle + 7)],
+                        BAR_COLOUR.filled(),
+                    ))?;
+                    root.draw(&Text::new(
+                        format!("{v:.3} {unit}"),
+                        (LABEL_WIDTH + w + 4, middle),
+                        left.clone(),
+                    ))?;
+                }
+                None => root.draw(&Text::new("–", (LABEL_WIDTH, middle), left.clone()))?,
             }
         }
-    }
-    out.push_str("</svg>");
-    out
+        Ok(())
+    })
 }
 
 #[cfg(test)]
@@ -317,19 +322,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn ticks_are_round_and_inside_the_range() {
-        let axis = Axis::new(-0.37, 1.22, 0.0, 100.0);
-        let ticks = axis.ticks();
-        let expected = [0.0, 0.5, 1.0];
-        assert_eq!(ticks.len(), expected.len(), "{ticks:?}");
-        assert!(
-            ticks
-                .iter()
-                .zip(expected)
-                .all(|(a, b)| (a - b).abs() < 1e-12),
-            "{ticks:?}"
-        );
-        assert!((axis.px(-0.37)).abs() < 1e-12 && (axis.px(1.22) - 100.0).abs() < 1e-12);
+    fn colours_ranges_and_tick_labels() {
+        assert_eq!(colour("#4a7ebb"), RGBColor(0x4a, 0x7e, 0xbb));
+        assert_eq!(colour("#123"), RGBColor(0x11, 0x22, 0x33));
+        assert_eq!(colour("blue"), BLACK);
+        assert_eq!(nonempty((2.0, 2.0)), (1.0, 3.0));
+        assert_eq!(padded_range([0.0, 10.0].into_iter()), (-0.5, 10.5));
+        assert_eq!(padded_range(std::iter::empty()), (-1.0, 1.0));
+        assert_eq!(tick_label(&0.5), "0.5");
+        assert_eq!(tick_label(&-0.0001), "0");
+        assert_eq!(tick_label(&12.0), "12");
     }
 
     #[test]
@@ -348,7 +350,7 @@ mod tests {
         .render();
         assert!(svg.starts_with("<svg") && svg.ends_with("</svg>"));
         assert!(svg.contains("a&lt;b") && svg.matches("<circle").count() == 2);
-        assert!(svg.contains("fill=\"#456\"") && svg.contains("<polyline"));
+        assert!(svg.contains("#445566") && svg.contains("<polyline"));
         let density = [0.1, 0.3, 0.1];
         let h = histogram(
             "h",
@@ -361,7 +363,8 @@ mod tests {
                 density: &density,
             }],
         );
-        assert!(h.contains("<path") && h.contains("N(0,1)"));
+        assert!(h.starts_with("<svg") && h.ends_with("</svg>"));
+        assert!(h.contains("<polyline") && h.contains("N(0,1)") && h.contains("#0000FF"));
         let b = bars(
             "b",
             "mm",

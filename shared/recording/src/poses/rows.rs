@@ -9,9 +9,9 @@ use super::header::{
     PosesHeader, TargetColumns, INDEX, JOINT_PREFIX, ORIENTATION_STD, POSITION, POSITION_STD,
     QUATERNION, SEQUENCE, SETUP, TEMPERATURE,
 };
-use crate::robot_toml::poses::{Measured, PosesRobot};
 use super::{PoseRow, PosesRecording, TargetMeasurement, UNIT_QUATERNION_TOLERANCE};
 use crate::error::{Problem, RecordingError};
+use crate::robot_toml::poses::{Measured, PosesRobot};
 
 /// Reads `path`: the joint names of its joint columns and every row, checked.
 pub(crate) fn read(

@@ -53,10 +53,11 @@ impl RobotToml {
     /// Checks `text`, the contents of the `robot.toml` at `path`.
     pub fn parse(path: &Path, text: String) -> Result<Self, RecordingError> {
         let robot = if names_a_format_string(&text) {
-            let robot = PosesRobot::from_toml_str(&text).map_err(|reason| RecordingError::Robot {
-                path: path.to_owned(),
-                reason,
-            })?;
+            let robot =
+                PosesRobot::from_toml_str(&text).map_err(|reason| RecordingError::Robot {
+                    path: path.to_owned(),
+                    reason,
+                })?;
             RobotDescription::Poses(robot)
         } else {
             RobotDescription::Biopsy(Box::new(sabr_model::parse_params_file(path, &text)?))
@@ -96,9 +97,8 @@ impl RobotToml {
 
 /// Whether `text` is TOML whose `format` key is a string (a poses format), not a number.
 fn names_a_format_string(text: &str) -> bool {
-    toml::from_str::<toml::Table>(text).is_ok_and(|table| {
-        table.get("format").is_some_and(toml::Value::is_str)
-    })
+    toml::from_str::<toml::Table>(text)
+        .is_ok_and(|table| table.get("format").is_some_and(toml::Value::is_str))
 }
 
 #[cfg(test)]
@@ -153,6 +153,9 @@ mod tests {
     #[test]
     fn a_missing_file_is_named() {
         let error = RobotToml::read(Path::new("/nonexistent/robot.toml")).unwrap_err();
-        assert!(error.to_string().contains("/nonexistent/robot.toml"), "{error}");
+        assert!(
+            error.to_string().contains("/nonexistent/robot.toml"),
+            "{error}"
+        );
     }
 }
