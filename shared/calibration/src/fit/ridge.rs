@@ -26,9 +26,10 @@ impl Gram {
     fn of(columns: &DMatrix<f64>, residual: &DVector<f64>, rows: &[usize]) -> Self {
         let a = columns.select_rows(rows);
         let r = residual.select_rows(rows);
+        let a_t = a.transpose();
         Gram {
-            gram: a.tr_mul(&a),
-            product: a.tr_mul(&r),
+            gram: &a_t * &a,
+            product: &a_t * &r,
             rr: r.norm_squared(),
         }
     }

@@ -375,8 +375,10 @@ impl RobotModel for SerialArm {
 
     fn jacobian(&self, problem: &Problem<'_, Self>) -> DMatrix<f64> {
         let ids = &problem.layout.ids;
-        self.columns(problem, ids.len(), |arm, obs, m, lin, col| {
-            arm.derivative(obs, m, lin, ids[col])
+        self.columns(problem, ids.len(), |arm, obs, m, lin, out| {
+            for (column, id) in out.iter_mut().zip(ids) {
+                *column = arm.derivative(obs, m, lin, *id);
+            }
         })
     }
 
@@ -437,14 +439,16 @@ impl RobotModel for SerialArm {
             offsets.push(total);
             total += c.dim();
         }
-        let lookup: Vec<(usize, usize)> = candidates
-            .iter()
-            .enumerate()
-            .flat_map(|(i, c)| (0..c.dim()).map(move |k| (i, k)))
-            .collect();
-        self.columns(problem, total, |arm, obs, _, lin, col| {
-            let (i, k) = lookup[col];
-            arm.effect_derivative(obs, lin, candidates[i])[k]
+        self.columns(problem, total, |arm, obs, _, lin, out| {
+            for (candidate, offset) in candidates.iter().zip(&offsets) {
+                for (k, column) in arm
+                    .effect_derivative(obs, lin, *candidate)
+                    .into_iter()
+                    .enumerate()
+                {
+                    out[offset + k] = column;
+                }
+            }
         })
     }
 
@@ -479,21 +483,16 @@ impl RobotModel for SerialArm {
 }
 
 impl SerialArm {
-    /// The whitened, weighted columns `∂r/∂·` of `problem`'s rows: `derivative(arm, obs,
-    /// target, linearisation, column)` gives the prediction's derivative for each column.
+    /// The whitened, weighted columns `∂r/∂·` of `problem`'s rows: `fill(arm, obs, target,
+    /// linearisation, columns)` writes the prediction's derivative for every column.
     fn columns(
         &self,
         problem: &Problem<'_, Self>,
         count: usize,
-        derivative: impl Fn(
-            &Self,
-            &PoseObservation,
-            &MeasuredTarget,
-            &predict::Linearised,
-            usize,
-        ) -> [f64; 6],
+        fill: impl Fn(&Self, &PoseObservation, &MeasuredTarget, &predict::Linearised, &mut [[f64; 6]]),
     ) -> DMatrix<f64> {
         let mut out = DMatrix::zeros(problem.rows, count);
+        let mut buffer = vec![[0.0; 6]; count];
         for (first, group) in problem.groups() {
             let obs = &problem.observations[group[0].obs];
             let Some(state) = self.state(obs) else {
@@ -504,8 +503,8 @@ impl SerialArm {
                     continue;
                 };
                 let lin = self.linearise(obs, &state, m);
-                for col in 0..count {
-                    let d = derivative(self, obs, m, &lin, col);
+                fill(self, obs, m, &lin, &mut buffer);
+                for (col, d) in buffer.iter().enumerate() {
                     let negated = d.map(|v| -v);
                     problem.write_block(first + k, &negated, |row, value| out[(row, col)] = value);
                 }

@@ -32,6 +32,15 @@ pub(super) struct Linearised {
     pub(super) jacobian: TargetJacobian,
     /// Rotation instrument ← root of the pose's set-up.
     to_instrument: UnitQuaternion<f64>,
+    /// The set-up frame's origin and correction axes (instrument frame).
+    setup_origin: Vector3<f64>,
+    setup_axes: [Vector3<f64>; 3],
+    /// The set-up's drift at this pose (mm).
+    drift: Vector3<f64>,
+    /// Rotation root ← link of the target's link, and the mounting's correction axes (link
+    /// frame).
+    link_rotation: UnitQuaternion<f64>,
+    mounting_axes: [Vector3<f64>; 3],
 }
 
 /// Position and angular rows as one derivative column.
@@ -111,11 +120,20 @@ impl SerialArm {
         measured: &MeasuredTarget,
     ) -> Linearised {
         let target = &self.targets[measured.target];
-        let mounting = self.mountings[measured.target].pose();
+        let mounting = &self.mountings[measured.target];
+        let setup = &self.setup_frames[obs.setup];
+        let setup_pose = setup.pose();
         Linearised {
             prediction: self.predict(obs, state, measured),
-            jacobian: self.tree.pose_jacobian(state, target.link, &mounting),
-            to_instrument: self.setup_frames[obs.setup].pose().rotation,
+            jacobian: self
+                .tree
+                .pose_jacobian(state, target.link, &mounting.pose()),
+            to_instrument: setup_pose.rotation,
+            setup_origin: setup_pose.translation.vector,
+            setup_axes: setup.rotation_axes(),
+            drift: self.drift(obs),
+            link_rotation: state.link_pose(target.link).rotation,
+            mounting_axes: mounting.rotation_axes(),
         }
     }
 
@@ -133,33 +151,28 @@ impl SerialArm {
                 if usize::from(setup) != obs.setup {
                     return [0.0; 6];
                 }
-                let frame = &self.setup_frames[obs.setup];
                 let k = usize::from(component);
                 if k < 3 {
                     let mut d = [0.0; 6];
                     d[k] = 1.0;
                     return d;
                 }
-                let axis = frame.rotation_axes()[k - 3];
-                let lever = lin.prediction.pose.translation.vector
-                    - self.drift(obs)
-                    - frame.pose().translation.vector;
+                let axis = lin.setup_axes[k - 3];
+                let lever = lin.prediction.pose.translation.vector - lin.drift - lin.setup_origin;
                 stack(axis.cross(&lever), axis)
             }
             SerialParam::Mounting { target, component } => {
                 if usize::from(target) != measured.target {
                     return [0.0; 6];
                 }
-                let mounting = &self.mountings[measured.target];
-                let link_rotation = lin.jacobian.pose.rotation * mounting.pose().rotation.inverse();
                 let k = usize::from(component);
                 if k < 3 {
                     let mut e = Vector3::zeros();
                     e[k] = 1.0;
-                    stack(r * (link_rotation * e), Vector3::zeros())
+                    stack(r * (lin.link_rotation * e), Vector3::zeros())
                 } else {
-                    let axis = mounting.rotation_axes()[k - 3];
-                    stack(Vector3::zeros(), r * (link_rotation * axis))
+                    let axis = lin.mounting_axes[k - 3];
+                    stack(Vector3::zeros(), r * (lin.link_rotation * axis))
                 }
             }
             SerialParam::Error(index) => {
