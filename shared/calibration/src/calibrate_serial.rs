@@ -13,7 +13,9 @@ use crate::discovery::families::select_families;
 use crate::fit::joint_fit::{joint_fit, JointFit};
 use crate::fit::pruning::minimal_layout;
 use crate::model::serial::params_file::SerialParamsFile;
-use crate::model::serial::{ArmData, PoseObservation, PoseSet, SerialArm, SerialError};
+use crate::model::serial::{
+    covered_ranges, ArmData, PoseObservation, PoseSet, SerialArm, SerialError,
+};
 use crate::model::{ParamLayout, RobotModel};
 use crate::report::output::write_atomically;
 use crate::report::serial::{
@@ -97,7 +99,8 @@ pub fn calibrate_serial(
             train.push(obs.clone());
         }
     }
-    let nominal = SerialArm::nominal(&data, options.use_orientation)?;
+    let mut nominal = SerialArm::nominal(&data, options.use_orientation)?;
+    nominal.covered = covered_ranges(nominal.tree.variables().len(), &train);
     let noise = nominal.start_noise();
     let set = PoseSet(train.clone());
     let mut frames = nominal.setup_layout();

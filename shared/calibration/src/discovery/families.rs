@@ -11,7 +11,8 @@
 //!    of [`HARMONIC_LEVEL`] (the residual is whitened, so pure noise stays below it).
 //! 2. **Score**: each family with the fitted parameters, under each ridge of
 //!    [`RIDGES`] (periodic families; others unregularised), is scored by its held-out error
-//!    over [`FOLDS`] random folds of the poses; the best ridge stands for the family.
+//!    over [`FOLDS`] random folds of the poses; the strongest ridge within
+//!    [`RIDGE_TOLERANCE`] of the best stands for the family.
 //! 3. **Confirm**: the best family joins the chosen set if the joint ridge step on
 //!    everything chosen (fitted parameters included) lowers the held-out error by at least
 //!    [`MIN_RELATIVE_GAIN`]; otherwise it is rejected and the next best is tried.
@@ -30,6 +31,9 @@ use crate::model::RobotModel;
 pub const FOLDS: usize = 5;
 /// Relative ridges tried on periodic families.
 pub const RIDGES: [f64; 5] = [1e-4, 1e-3, 1e-2, 1e-1, 1.0];
+/// A stronger ridge is preferred while its held-out error is within this fraction of the
+/// best ridge's (the smoother of two equally good fits extrapolates better).
+pub const RIDGE_TOLERANCE: f64 = 0.01;
 /// Level at which a harmonic's power counts as more than noise.
 pub const HARMONIC_LEVEL: f64 = 1e-3;
 /// Smallest relative reduction of the held-out error that keeps a family.
@@ -215,19 +219,31 @@ pub fn select_families<M: RobotModel>(fit: &JointFit<M>, seed: u64) -> FamilySel
             let columns: Vec<usize> = members.iter().flat_map(|&k| ranges[k].clone()).collect();
             let set: Vec<usize> = fitted.iter().chain(&columns).copied().collect();
             let ridges: &[f64] = if family.periodic { &RIDGES } else { &[0.0] };
-            for &ridge in ridges {
-                let lambdas: Vec<f64> = fitted
-                    .iter()
-                    .map(|_| 0.0)
-                    .chain(columns.iter().map(|_| ridge))
-                    .collect();
-                let Some(scored) = residual_design.fit(&set, &lambdas) else {
-                    continue;
-                };
-                let gain = local_base.held_out - scored.held_out;
-                if best.as_ref().is_none_or(|b| gain > b.0) {
-                    best = Some((gain, f, members.clone(), ridge));
-                }
+            let scored: Vec<(f64, f64)> = ridges
+                .iter()
+                .filter_map(|&ridge| {
+                    let lambdas: Vec<f64> = fitted
+                        .iter()
+                        .map(|_| 0.0)
+                        .chain(columns.iter().map(|_| ridge))
+                        .collect();
+                    Some((ridge, residual_design.fit(&set, &lambdas)?.held_out))
+                })
+                .collect();
+            let Some(lowest) = scored.iter().map(|s| s.1).min_by(f64::total_cmp) else {
+                continue;
+            };
+            // The strongest ridge that does about as well as the best one.
+            let Some(&(ridge, held_out)) = scored
+                .iter()
+                .filter(|s| s.1 <= lowest * (1.0 + RIDGE_TOLERANCE))
+                .max_by(|a, b| a.0.total_cmp(&b.0))
+            else {
+                continue;
+            };
+            let gain = local_base.held_out - held_out;
+            if best.as_ref().is_none_or(|b| gain > b.0) {
+                best = Some((gain, f, members.clone(), ridge));
             }
         }
         let Some((gain, f, members, ridge)) = best else {

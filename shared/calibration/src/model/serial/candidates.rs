@@ -1,8 +1,10 @@
 //! The effects a serial arm can carry beyond its geometry, each linear in its parameters:
 //!
 //! - **periodic** joint errors (gear and encoder eccentricity, strain-wave ripple): the
-//!   joint reads `q` but stands at `q + a·sin(h·q) + b·cos(h·q)`, harmonic `h` of one
-//!   revolute joint;
+//!   joint reads `q` but stands at `q + a·sin(h·q̃) + b·cos(h·q̃)`, harmonic `h` of one
+//!   revolute joint, where `q̃` is `q` clamped to the range the calibration poses covered (a
+//!   sum of harmonics fitted on part of a turn is not known on the rest; held constant
+//!   there, it cannot blow up);
 //! - **gravity compliance**: the joint yields by `c·τ_links + k·τ_1kg`, with the links'
 //!   static gravity torque and the torque of 1 kg at the target (a probe of unknown mass);
 //! - **thermal expansion**: every position in the robot's root frame grows by `α·(T − T₀)`;
@@ -86,10 +88,17 @@ impl SerialEffect {
 
     /// The joint-coordinate offset features of a joint effect at `obs` (what multiplies
     /// each coefficient), with the variable they move; `None` for a non-joint effect.
-    pub fn joint_features(self, obs: &PoseObservation) -> Option<(usize, [f64; 2])> {
+    /// `covered` is the calibrated range of each variable (rad or mm).
+    pub fn joint_features(
+        self,
+        obs: &PoseObservation,
+        covered: &[[f64; 2]],
+    ) -> Option<(usize, [f64; 2])> {
         match self {
             SerialEffect::Periodic { variable, harmonic } => {
-                let angle = f64::from(harmonic) * obs.joints[usize::from(variable)];
+                let v = usize::from(variable);
+                let [lo, hi] = covered[v];
+                let angle = f64::from(harmonic) * obs.joints[v].clamp(lo, hi.max(lo));
                 Some((usize::from(variable), [angle.sin(), angle.cos()]))
             }
             SerialEffect::Compliance { variable } => {

@@ -90,6 +90,9 @@ pub struct SerialArm {
     pub reference_temperature_c: f64,
     /// Whether any pose has a temperature (the thermal effect is offered only then).
     pub has_temperature: bool,
+    /// Per joint variable: the range the calibration poses covered (rad or mm); periodic
+    /// effects hold their value outside it.
+    pub covered: Vec<[f64; 2]>,
 }
 
 /// Poses per set-up needed to register it.
@@ -120,6 +123,7 @@ impl SerialArm {
                 temperatures.iter().sum::<f64>() / temperatures.len() as f64
             },
             has_temperature: !temperatures.is_empty(),
+            covered: covered_ranges(data.tree.variables().len(), &data.observations),
         };
         for setup in 0..data.setups.len() {
             arm.register_setup(data, setup)?;
@@ -243,6 +247,18 @@ impl SerialArm {
     fn variable_name(&self, variable: usize) -> String {
         self.tree.variables()[variable].name.clone()
     }
+}
+
+/// Per joint variable, the smallest and largest value in `observations`.
+pub fn covered_ranges(variables: usize, observations: &[PoseObservation]) -> Vec<[f64; 2]> {
+    let mut ranges = vec![[f64::INFINITY, f64::NEG_INFINITY]; variables];
+    for obs in observations {
+        for (range, q) in ranges.iter_mut().zip(&obs.joints) {
+            range[0] = range[0].min(*q);
+            range[1] = range[1].max(*q);
+        }
+    }
+    ranges
 }
 
 /// A fixed set of observations to fit.

@@ -64,6 +64,9 @@ pub struct SerialParamsFile {
     pub targets: Vec<FrameEntry>,
     /// Geometric errors by parameter name (mm or rad); absent ones are zero.
     pub geometric_errors: std::collections::BTreeMap<String, f64>,
+    /// Per joint variable: the range the calibration poses covered (rad or mm), outside
+    /// which periodic effects hold their value.
+    pub covered_ranges: std::collections::BTreeMap<String, [f64; 2]>,
     /// Effects.
     pub effects: Vec<EffectEntry>,
 }
@@ -104,6 +107,11 @@ impl SerialParamsFile {
                 .zip(&arm.errors)
                 .filter(|(_, v)| **v != 0.0)
                 .map(|(p, v)| (p.name.clone(), *v))
+                .collect(),
+            covered_ranges: variables
+                .iter()
+                .zip(&arm.covered)
+                .map(|(v, r)| (v.name.clone(), *r))
                 .collect(),
             effects: arm
                 .effects
@@ -229,6 +237,13 @@ impl SerialParamsFile {
                 )
             })?;
             arm.errors[index] = *value;
+        }
+        for (name, range) in &self.covered_ranges {
+            let v = arm
+                .tree
+                .variable_index(name)
+                .map_err(|e| field_error(path, "covered_ranges", e.to_string()))?;
+            arm.covered[v] = *range;
         }
         arm.effects.clear();
         for (k, e) in self.effects.iter().enumerate() {

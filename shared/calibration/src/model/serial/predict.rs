@@ -53,7 +53,7 @@ impl SerialArm {
     pub(super) fn effective_joints(&self, obs: &PoseObservation) -> Vec<f64> {
         let mut joints = obs.joints.clone();
         for (effect, coefficients) in &self.effects {
-            if let Some((variable, features)) = effect.joint_features(obs) {
+            if let Some((variable, features)) = effect.joint_features(obs, &self.covered) {
                 joints[variable] += coefficients[0] * features[0] + coefficients[1] * features[1];
             }
         }
@@ -200,7 +200,7 @@ impl SerialArm {
         let r = lin.to_instrument;
         match effect {
             SerialEffect::Periodic { .. } | SerialEffect::Compliance { .. } => {
-                let Some((variable, features)) = effect.joint_features(obs) else {
+                let Some((variable, features)) = effect.joint_features(obs, &self.covered) else {
                     return vec![[0.0; 6]; effect.dim()];
                 };
                 let c = lin.jacobian.joints.column(variable);
