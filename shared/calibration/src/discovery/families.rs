@@ -33,7 +33,7 @@ pub const FOLDS: usize = 5;
 pub const RIDGES: [f64; 5] = [1e-4, 1e-3, 1e-2, 1e-1, 1.0];
 /// A stronger ridge is preferred while its held-out error is within this fraction of the
 /// best ridge's (the smoother of two equally good fits extrapolates better).
-pub const RIDGE_TOLERANCE: f64 = 0.01;
+pub const RIDGE_TOLERANCE: f64 = 0.05;
 /// Level at which a harmonic's power counts as more than noise.
 pub const HARMONIC_LEVEL: f64 = 1e-3;
 /// Smallest relative reduction of the held-out error that keeps a family.

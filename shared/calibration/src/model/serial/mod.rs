@@ -370,22 +370,27 @@ impl RobotModel for SerialArm {
         blocks: &[Block],
         out: &mut Vec<Option<[f64; 6]>>,
     ) {
-        for (_, group) in groups(blocks) {
-            let obs = &observations[group[0].obs];
-            let state = self.state(obs);
-            for block in group {
-                let raw = state.as_ref().and_then(|state| {
-                    let m = obs.measured.iter().find(|m| m.target == block.kind.0)?;
-                    let predicted = self.predict(obs, state, m).pose;
-                    let dp = m.position - predicted.translation.vector;
-                    let dr = match (block.dim, m.orientation) {
-                        (6, Some(q)) => rotation_log(&(q * predicted.rotation.inverse())),
-                        _ => nalgebra::Vector3::zeros(),
-                    };
-                    Some([dp.x, dp.y, dp.z, dr.x, dr.y, dr.z])
-                });
-                out.push(raw);
-            }
+        let chunks = chunks(blocks);
+        let parts: Vec<Vec<Option<[f64; 6]>>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = chunks
+                .iter()
+                .map(|range| {
+                    let part = &blocks[range.clone()];
+                    scope.spawn(move || {
+                        let mut raws = Vec::with_capacity(part.len());
+                        self.residuals_of(observations, part, &mut raws);
+                        raws
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .zip(&chunks)
+                .map(|(h, range)| h.join().unwrap_or_else(|_| vec![None; range.len()]))
+                .collect()
+        });
+        for part in parts {
+            out.extend(part);
         }
     }
 
@@ -499,17 +504,76 @@ impl RobotModel for SerialArm {
 }
 
 impl SerialArm {
+    /// Raw residuals of `blocks` (see [`RobotModel::residuals`]), on this thread.
+    fn residuals_of(
+        &self,
+        observations: &[PoseObservation],
+        blocks: &[Block],
+        out: &mut Vec<Option<[f64; 6]>>,
+    ) {
+        for (_, group) in groups(blocks) {
+            let obs = &observations[group[0].obs];
+            let state = self.state(obs);
+            for block in group {
+                let raw = state.as_ref().and_then(|state| {
+                    let m = obs.measured.iter().find(|m| m.target == block.kind.0)?;
+                    let predicted = self.predict(obs, state, m).pose;
+                    let dp = m.position - predicted.translation.vector;
+                    let dr = match (block.dim, m.orientation) {
+                        (6, Some(q)) => rotation_log(&(q * predicted.rotation.inverse())),
+                        _ => nalgebra::Vector3::zeros(),
+                    };
+                    Some([dp.x, dp.y, dp.z, dr.x, dr.y, dr.z])
+                });
+                out.push(raw);
+            }
+        }
+    }
+
     /// The whitened, weighted columns `∂r/∂·` of `problem`'s rows: `fill(arm, obs, target,
-    /// linearisation, columns)` writes the prediction's derivative for every column.
-    fn columns(
+    /// linearisation, columns)` writes the prediction's derivative for every column. The
+    /// blocks are shared out over threads.
+    fn columns<F>(&self, problem: &Problem<'_, Self>, count: usize, fill: F) -> DMatrix<f64>
+    where
+        F: Fn(&Self, &PoseObservation, &MeasuredTarget, &predict::Linearised, &mut [[f64; 6]])
+            + Sync,
+    {
+        let mut out = DMatrix::zeros(problem.rows, count);
+        let chunks = chunks(problem.blocks);
+        let parts: Vec<Option<(usize, DMatrix<f64>)>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = chunks
+                .iter()
+                .map(|range| {
+                    let fill = &fill;
+                    let range = range.clone();
+                    scope.spawn(move || self.columns_of(problem, range, count, fill))
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().ok()).collect()
+        });
+        for (first_row, part) in parts.into_iter().flatten() {
+            out.rows_mut(first_row, part.nrows()).copy_from(&part);
+        }
+        out
+    }
+
+    /// The columns of the rows of blocks `range`: their first row and the rows.
+    fn columns_of<F>(
         &self,
         problem: &Problem<'_, Self>,
+        range: std::ops::Range<usize>,
         count: usize,
-        fill: impl Fn(&Self, &PoseObservation, &MeasuredTarget, &predict::Linearised, &mut [[f64; 6]]),
-    ) -> DMatrix<f64> {
-        let mut out = DMatrix::zeros(problem.rows, count);
+        fill: &F,
+    ) -> (usize, DMatrix<f64>)
+    where
+        F: Fn(&Self, &PoseObservation, &MeasuredTarget, &predict::Linearised, &mut [[f64; 6]]),
+    {
+        let blocks = &problem.blocks[range.clone()];
+        let first_row = blocks.first().map_or(0, |b| b.row);
+        let rows = blocks.last().map_or(0, |b| b.row + b.dim - first_row);
+        let mut out = DMatrix::zeros(rows, count);
         let mut buffer = vec![[0.0; 6]; count];
-        for (first, group) in problem.groups() {
+        for (first, group) in groups(blocks) {
             let obs = &problem.observations[group[0].obs];
             let Some(state) = self.state(obs) else {
                 continue;
@@ -522,12 +586,39 @@ impl SerialArm {
                 fill(self, obs, m, &lin, &mut buffer);
                 for (col, d) in buffer.iter().enumerate() {
                     let negated = d.map(|v| -v);
-                    problem.write_block(first + k, &negated, |row, value| out[(row, col)] = value);
+                    problem.write_block(range.start + first + k, &negated, |row, value| {
+                        out[(row - first_row, col)] = value
+                    });
                 }
             }
         }
-        out
+        (first_row, out)
     }
+}
+
+/// Blocks per thread below which one thread does it all.
+const MIN_BLOCKS_PER_THREAD: usize = 1000;
+
+/// `blocks` cut at observation boundaries into one range per available core (at most 4).
+fn chunks(blocks: &[Block]) -> Vec<std::ops::Range<usize>> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .clamp(1, 4)
+        .min(blocks.len() / MIN_BLOCKS_PER_THREAD)
+        .max(1);
+    let mut ranges = Vec::with_capacity(threads);
+    let mut start = 0;
+    for t in 1..=threads {
+        let mut end = blocks.len() * t / threads;
+        while end > start && end < blocks.len() && blocks[end].obs == blocks[end - 1].obs {
+            end += 1;
+        }
+        if end > start {
+            ranges.push(start..end);
+        }
+        start = end;
+    }
+    ranges
 }
 
 impl SerialArm {

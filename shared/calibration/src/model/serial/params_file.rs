@@ -247,6 +247,15 @@ impl SerialParamsFile {
         }
         arm.effects.clear();
         for (k, e) in self.effects.iter().enumerate() {
+            // A drift belongs to an instrument placement; a new placement has its own.
+            let foreign_drift = e.class == "drift"
+                && !arm
+                    .setups
+                    .iter()
+                    .any(|s| Some(s.as_str()) == e.setup.as_deref());
+            if refit_setup && foreign_drift {
+                continue;
+            }
             let effect = self.effect(path, arm, k, e)?;
             if e.coefficients.len() != effect.dim() {
                 return Err(field_error(
