@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 mod bench;
 mod calibrate_cmd;
+mod evaluate_cmd;
 mod export_cmd;
 mod import_cmd;
 mod kinematics_cmd;
@@ -36,6 +37,8 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Calibrate the robot from a recording: params.toml, report.json, report.html.
     Calibrate(calibrate_cmd::CalibrateArgs),
+    /// Error of calibrated serial-arm parameters on another poses-v1 recording.
+    Evaluate(evaluate_cmd::EvaluateArgs),
     /// Import measured data as a recording: `sabr import ipa` (UR10 laser-tracker series → poses v1).
     Import(import_cmd::ImportArgs),
     /// Soak: run the sensing graph for minutes; lost encoder samples, rates, memory, CPU.
@@ -53,6 +56,7 @@ fn main() -> std::process::ExitCode {
         Command::Launch(args) => launcher::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Calibrate(args) => calibrate_cmd::run(&args),
+        Command::Evaluate(args) => evaluate_cmd::run(&args),
         Command::Import(args) => import_cmd::run(&args),
         Command::Soak(args) => soak::run(&args),
         Command::Export(args) => export_cmd::run(&args),

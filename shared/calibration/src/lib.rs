@@ -24,6 +24,7 @@
 //! plugs in by implementing it (and a [`model::Dataset`] of its observations).
 
 pub mod calibrate;
+pub mod calibrate_serial;
 pub mod data;
 pub mod discovery;
 pub mod error;

@@ -25,6 +25,7 @@
 //!    the evidence and the metrics before and after; the final fit, whether its residual is
 //!    noise ([`significance`]), the leads and the strongest correlates.
 
+pub mod families;
 pub mod report;
 mod round;
 pub mod selection;

@@ -126,6 +126,38 @@ pub fn analyse(names: &[String], jacobian: &DMatrix<f64>, residual: &DVector<f64
     }
 }
 
+/// The direction of parameter space the weighted Jacobian `jacobian` determines least (of
+/// the column-scaled Jacobian, so units do not matter), with its relative singular value;
+/// `None` for an empty layout.
+pub fn weakest_direction(names: &[String], jacobian: &DMatrix<f64>) -> Option<NearNullDirection> {
+    let n = jacobian.ncols();
+    if n == 0 {
+        return None;
+    }
+    let mut scaled = jacobian.clone();
+    for mut column in scaled.column_iter_mut() {
+        let norm = column.norm();
+        if norm > 0.0 {
+            column /= norm;
+        }
+    }
+    let r = scaled.qr().r();
+    let svd = r.svd(false, true);
+    let v_t = svd.v_t?;
+    let (weakest, smallest) = svd
+        .singular_values
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))?;
+    let largest = svd.singular_values.max();
+    let v = v_t.row(weakest).transpose();
+    Some(direction(
+        names,
+        &v,
+        smallest / largest.max(f64::MIN_POSITIVE),
+    ))
+}
+
 fn direction(names: &[String], v: &DVector<f64>, relative: f64) -> NearNullDirection {
     let mut involved: Vec<(usize, f64)> = v
         .iter()

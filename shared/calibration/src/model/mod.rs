@@ -26,6 +26,7 @@ pub mod blocks;
 pub mod layout;
 pub mod noise;
 pub mod problem;
+pub mod serial;
 
 use std::fmt::Debug;
 use std::hash::Hash;

@@ -9,6 +9,7 @@ pub mod discovery_html;
 pub mod html;
 pub mod output;
 pub mod plots;
+pub mod serial;
 mod svg;
 
 use serde::Serialize;
