@@ -2,8 +2,8 @@
 
 use sabr_foxglove::{McapExportError, McapSink, SessionStream, StreamOptions};
 use sabr_model::RobotParams;
-use sabr_recording::live::{encoder_row, phase_row, tracker_rows};
 use sabr_msgs::{EncoderSample, PhaseMark, TrackerFrame};
+use sabr_recording::live::{encoder_row, phase_row, tracker_rows};
 use sabr_recording::{FlushPolicy, RecordingError, RecordingWriter, TrackerRow};
 use std::fs::File;
 use std::io::BufWriter;
