@@ -117,8 +117,13 @@ fn quick_hops_measure_the_live_graphs() {
         assert!(values[0] > 0.0, "{name}: {row:?}");
         assert!(values.windows(2).all(|w| w[0] <= w[1]), "{name}: {row:?}");
     }
-    // A frame paired with the wrong truth would be off by a frame period (50 ms).
-    assert!(number(&rows["hop/matching-error"], "p50") < 2e6, "{stdout}");
+    // A frame paired with the wrong truth would be off by a frame period (50 ms). The right
+    // pairing is off by the driver's arrival-stamp bias: about 0.7 ms on an idle machine, 2 ms
+    // seen on a CI machine whose hypervisor stole 20-40 % of the CPU; 10 ms tells the two apart.
+    assert!(
+        number(&rows["hop/matching-error"], "p50") < 10e6,
+        "{stdout}"
+    );
     // The rig applies a setpoint at its next 0.5 ms tick.
     assert!(
         number(&rows["hop/setpoint-to-rig"], "p50") < 5e6,
