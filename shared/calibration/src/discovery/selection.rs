@@ -11,6 +11,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::fit::joint_fit::JointFit;
+use crate::fit::ridge::scaled_columns;
 use crate::model::RobotModel;
 
 /// Cross-validation folds.
@@ -94,17 +95,7 @@ impl Design {
     ) -> Self {
         let fitted = jacobian.ncols();
         let rows = residual.len();
-        let mut columns = DMatrix::zeros(rows, fitted + extra.ncols());
-        columns.columns_mut(0, fitted).copy_from(jacobian);
-        columns.columns_mut(fitted, extra.ncols()).copy_from(extra);
-        let scales: Vec<f64> = columns
-            .column_iter()
-            .map(|c| c.norm())
-            .map(|n| if n > 0.0 { n } else { 1.0 })
-            .collect();
-        for (k, mut column) in columns.column_iter_mut().enumerate() {
-            column /= scales[k];
-        }
+        let (columns, scales) = scaled_columns(jacobian, extra);
         let grams: Vec<Gram> = (0..FOLDS)
             .map(|f| {
                 let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();

@@ -108,17 +108,7 @@ impl RidgeDesign {
     ) -> Self {
         let fitted = jacobian.ncols();
         let rows = residual.len();
-        let mut columns = DMatrix::zeros(rows, fitted + extra.ncols());
-        columns.columns_mut(0, fitted).copy_from(jacobian);
-        columns.columns_mut(fitted, extra.ncols()).copy_from(extra);
-        let scales: Vec<f64> = columns
-            .column_iter()
-            .map(|c| c.norm())
-            .map(|n| if n > 0.0 { n } else { 1.0 })
-            .collect();
-        for (k, mut column) in columns.column_iter_mut().enumerate() {
-            column /= scales[k];
-        }
+        let (columns, scales) = scaled_columns(jacobian, extra);
         let owns: Vec<Gram> = (0..folds)
             .map(|f| {
                 let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();
@@ -217,6 +207,25 @@ impl RidgeDesign {
     pub fn rr(&self) -> f64 {
         self.total.rr
     }
+}
+
+/// The columns of `jacobian` followed by those of `extra`, each scaled to unit norm (a zero
+/// column keeps scale 1), and the scales: the common form of every design the ridge and the
+/// selection solve, so their penalties act on comparable columns.
+pub fn scaled_columns(jacobian: &DMatrix<f64>, extra: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
+    let fitted = jacobian.ncols();
+    let mut columns = DMatrix::zeros(jacobian.nrows(), fitted + extra.ncols());
+    columns.columns_mut(0, fitted).copy_from(jacobian);
+    columns.columns_mut(fitted, extra.ncols()).copy_from(extra);
+    let scales: Vec<f64> = columns
+        .column_iter()
+        .map(|c| c.norm())
+        .map(|n| if n > 0.0 { n } else { 1.0 })
+        .collect();
+    for (k, mut column) in columns.column_iter_mut().enumerate() {
+        column /= scales[k];
+    }
+    (columns, scales)
 }
 
 #[cfg(test)]
