@@ -11,7 +11,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::fit::joint_fit::JointFit;
-use crate::fit::ridge::scaled_columns;
+use crate::fit::ridge::{fold_grams, scaled_columns, Gram};
 use crate::model::RobotModel;
 
 /// Cross-validation folds.
@@ -20,13 +20,6 @@ pub const FOLDS: usize = 10;
 const BLOCKS_PER_FOLD: usize = 4;
 /// Ridge on the unit-normalised Gram diagonal (keeps near-collinear sets solvable).
 const RIDGE: f64 = 1e-10;
-
-#[derive(Debug, Clone)]
-struct Gram {
-    gram: DMatrix<f64>,
-    product: DVector<f64>,
-    rr: f64,
-}
 
 impl Gram {
     /// Residual sum of squares after the step on `set` solved from `train` (`None` when the
@@ -96,41 +89,7 @@ impl Design {
         let fitted = jacobian.ncols();
         let rows = residual.len();
         let (columns, scales) = scaled_columns(jacobian, extra);
-        let grams: Vec<Gram> = (0..FOLDS)
-            .map(|f| {
-                let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();
-                let a = columns.select_rows(&selected);
-                let a_t = a.transpose();
-                let r = residual.select_rows(&selected);
-                Gram {
-                    rr: r.norm_squared(),
-                    gram: &a_t * &a,
-                    product: &a_t * r,
-                }
-            })
-            .collect();
-        let total = Gram {
-            gram: grams
-                .iter()
-                .fold(DMatrix::zeros(columns.ncols(), columns.ncols()), |s, g| {
-                    s + &g.gram
-                }),
-            product: grams
-                .iter()
-                .fold(DVector::zeros(columns.ncols()), |s, g| s + &g.product),
-            rr: grams.iter().map(|g| g.rr).sum(),
-        };
-        let folds = grams
-            .into_iter()
-            .map(|own| {
-                let train = Gram {
-                    gram: &total.gram - &own.gram,
-                    product: &total.product - &own.product,
-                    rr: total.rr - own.rr,
-                };
-                (own, train)
-            })
-            .collect();
+        let (total, folds) = fold_grams(&columns, residual, fold_of_row, FOLDS);
         Self {
             fitted,
             scales,

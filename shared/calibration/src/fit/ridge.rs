@@ -16,10 +16,13 @@ use nalgebra::{DMatrix, DVector};
 
 /// Gram matrix, product with the residual and residual sum of squares of some rows.
 #[derive(Debug, Clone)]
-struct Gram {
-    gram: DMatrix<f64>,
-    product: DVector<f64>,
-    rr: f64,
+pub(crate) struct Gram {
+    /// `AᵀA` of the rows.
+    pub(crate) gram: DMatrix<f64>,
+    /// `Aᵀr` of the rows.
+    pub(crate) product: DVector<f64>,
+    /// `rᵀr` of the rows.
+    pub(crate) rr: f64,
 }
 
 impl Gram {
@@ -107,27 +110,8 @@ impl RidgeDesign {
         folds: usize,
     ) -> Self {
         let fitted = jacobian.ncols();
-        let rows = residual.len();
         let (columns, scales) = scaled_columns(jacobian, extra);
-        let owns: Vec<Gram> = (0..folds)
-            .map(|f| {
-                let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();
-                Gram::of(&columns, residual, &selected)
-            })
-            .collect();
-        let mut total = owns[0].clone();
-        for own in &owns[1..] {
-            total.gram += &own.gram;
-            total.product += &own.product;
-            total.rr += own.rr;
-        }
-        let folds = owns
-            .into_iter()
-            .map(|own| {
-                let train = total.minus(&own);
-                (own, train)
-            })
-            .collect();
+        let (total, folds) = fold_grams(&columns, residual, fold_of_row, folds);
         Self {
             fitted,
             scales,
@@ -207,6 +191,37 @@ impl RidgeDesign {
     pub fn rr(&self) -> f64 {
         self.total.rr
     }
+}
+
+/// The Gram of all rows and, per fold (`fold_of_row[r] < folds`), the fold's own Gram and that
+/// of the other folds (its training rows).
+pub(crate) fn fold_grams(
+    columns: &DMatrix<f64>,
+    residual: &DVector<f64>,
+    fold_of_row: &[usize],
+    folds: usize,
+) -> (Gram, Vec<(Gram, Gram)>) {
+    let rows = residual.len();
+    let owns: Vec<Gram> = (0..folds)
+        .map(|f| {
+            let selected: Vec<usize> = (0..rows).filter(|&r| fold_of_row[r] == f).collect();
+            Gram::of(columns, residual, &selected)
+        })
+        .collect();
+    let mut total = owns[0].clone();
+    for own in &owns[1..] {
+        total.gram += &own.gram;
+        total.product += &own.product;
+        total.rr += own.rr;
+    }
+    let folds = owns
+        .into_iter()
+        .map(|own| {
+            let train = total.minus(&own);
+            (own, train)
+        })
+        .collect();
+    (total, folds)
 }
 
 /// The columns of `jacobian` followed by those of `extra`, each scaled to unit norm (a zero
