@@ -64,6 +64,21 @@ fn main() -> anyhow::Result<()> {
             c.label, c.chi2_gain, c.explained_share, c.held_out_gain, c.significant
         );
     }
+    println!("hysteresis (joint error by direction; direction × error along the travel):");
+    for h in &report.r#final.hysteresis {
+        let travel: Vec<String> = h
+            .by_travel_mrad
+            .iter()
+            .map(|(t, e, _)| format!("{t:.1}:{e:+.3}"))
+            .collect();
+        println!(
+            "  θ{} down/up {:?} mrad; {}",
+            h.joint,
+            h.mean_by_direction_mrad
+                .map(|m| m.map(|v| (v * 1e3).round() / 1e3)),
+            travel.join(" ")
+        );
+    }
     println!("strongest correlates of the final residual:");
     for c in &report.r#final.strongest_correlates {
         println!(

@@ -52,8 +52,10 @@ pub enum KinematicsError {
 /// The gimbal centres and the needle frame axes, in `Bb` (mm): what FK computes before it
 /// builds poses.
 struct NeedleChain {
-    /// Front stage planar effector point `(x, y)` in `Bf` (mm).
-    front_planar: (f64, f64),
+    /// Front effector point in `Bf` (mm; in its plane z = 0 unless θ1 or θ2 is tilted).
+    front_local: Vector3<f64>,
+    /// Rotation of the back stage about its (possibly tilted) θ3 axis.
+    roll: Rotation3<f64>,
     /// Back gimbal centre `p_b`.
     p_b: Vector3<f64>,
     /// Needle axes `x_N`, `y_N`, `z_N`.
@@ -70,20 +72,56 @@ fn check_finite_joints(q: &Joints, what: &'static str) -> Result<(), KinematicsE
     }
 }
 
-/// `Rx(θ) · v`.
-fn rotate_x(angle: f64, v: &Vector3<f64>) -> Vector3<f64> {
-    let (s, c) = angle.sin_cos();
-    Vector3::new(v.x, c * v.y - s * v.z, s * v.y + c * v.z)
+/// The tilt of a stage joint's axis (z of its stage plane): `Rx(tilt[0])·Ry(tilt[1])`.
+fn stage_tilt(tilt: [f64; 2]) -> Rotation3<f64> {
+    Rotation3::from_axis_angle(&Vector3::x_axis(), tilt[0])
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), tilt[1])
+}
+
+/// Effector point of a stage (mm, stage frame) from its proximal and distal link vectors,
+/// each turned by the tilt of the joint that drives it.
+fn stage_point(links: [(f64, f64); 2], tilts: [[f64; 2]; 2]) -> Vector3<f64> {
+    links
+        .iter()
+        .zip(tilts)
+        .map(|(&(x, y), tilt)| {
+            let v = Vector3::new(x, y, 0.0);
+            if tilt == [0.0; 2] {
+                v
+            } else {
+                stage_tilt(tilt) * v
+            }
+        })
+        .sum()
+}
+
+/// Rotation by θ3 about the roll axis, x of `Bb` tilted by `Ry(tilt[0])·Rz(tilt[1])`.
+fn roll_rotation(theta3: f64, tilt: [f64; 2]) -> Rotation3<f64> {
+    let roll = Rotation3::from_axis_angle(&Vector3::x_axis(), theta3);
+    if tilt == [0.0; 2] {
+        return roll;
+    }
+    let axis = Rotation3::from_axis_angle(&Vector3::y_axis(), tilt[0])
+        * Rotation3::from_axis_angle(&Vector3::z_axis(), tilt[1]);
+    axis * roll * axis.inverse()
 }
 
 /// Steps 1–4 of docs/robot-model.md §3 without building poses.
 fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, KinematicsError> {
     check_finite_joints(q, "joint angles")?;
-    let front_planar = FiveBar::front(geometry).forward(q[0], q[1]);
-    let back_planar = FiveBar::back(geometry).forward(q[3], q[4]);
-    let p_f = geometry.front_base * Point3::new(front_planar.0, front_planar.1, 0.0);
-    let p_b = rotate_x(q[2], &Vector3::new(back_planar.0, back_planar.1, 0.0));
-    let a_b = rotate_x(q[2], &Vector3::y());
+    let tilt = &geometry.axis_tilt;
+    let front_local = stage_point(
+        FiveBar::front(geometry).link_vectors(q[0], q[1]),
+        [tilt[0], tilt[1]],
+    );
+    let back_local = stage_point(
+        FiveBar::back(geometry).link_vectors(q[3], q[4]),
+        [tilt[3], tilt[4]],
+    );
+    let p_f = geometry.front_base * Point3::from(front_local);
+    let roll = roll_rotation(q[2], tilt[2]);
+    let p_b = roll * back_local;
+    let a_b = roll * Vector3::y();
 
     let d = geometry.d_offset;
     let to_front = p_f.coords - p_b;
@@ -113,7 +151,8 @@ fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, Kinemati
     let z_n = (p_f.coords - p_r).normalize();
     let x_n = y_n.cross(&z_n);
     Ok(NeedleChain {
-        front_planar,
+        front_local,
+        roll,
         p_b,
         axes: [x_n, y_n, z_n],
         tip: p_r + geometry.l_n * z_n,
@@ -140,13 +179,16 @@ pub fn forward(geometry: &Geometry, q: &Joints) -> Result<NeedlePose, Kinematics
     let needle_rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
         Matrix3::from_columns(&[x_n, y_n, z_n]),
     ));
-    let (x, y) = chain.front_planar;
+    let tilt = &geometry.axis_tilt;
     let front_in_base = Isometry3::from_parts(
-        Translation3::new(x, y, 0.0),
-        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), q[1]),
+        Translation3::from(chain.front_local),
+        UnitQuaternion::from_rotation_matrix(
+            &(stage_tilt(tilt[1]) * Rotation3::from_axis_angle(&Vector3::z_axis(), q[1])),
+        ),
     );
-    let back_rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), q[2])
-        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), q[4]);
+    let back_rotation = UnitQuaternion::from_rotation_matrix(
+        &(chain.roll * stage_tilt(tilt[4]) * Rotation3::from_axis_angle(&Vector3::z_axis(), q[4])),
+    );
     Ok(NeedlePose {
         tip: Point3::from(chain.tip),
         direction: Unit::new_unchecked(z_n),
@@ -193,6 +235,9 @@ pub fn inverse(
         )));
     }
     let z = direction / length;
+    if geometry.axis_tilt != [[0.0; 2]; 5] {
+        return inverse_tilted(geometry, tip, &z, near);
+    }
     let p_r = tip.coords - geometry.l_n * z;
 
     // p_f: the needle line p_r + t·z meets the plane z = 0 of Bf.
@@ -269,6 +314,74 @@ pub fn inverse(
         last_failure = "no candidate solution reproduces the target (singular pose)".into();
     }
     Err(KinematicsError::Unreachable(last_failure.into_owned()))
+}
+
+/// Newton steps of the inverse kinematics with tilted joint axes.
+const TILTED_IK_ITERATIONS: usize = 30;
+/// Joint step (rad) of the finite differences of the tilted inverse kinematics.
+const TILTED_IK_STEP: f64 = 1e-7;
+
+/// Inverse kinematics with tilted joint axes (§4): the closed-form solution of the untilted
+/// geometry, refined by Newton steps on the tip (3 equations) and the needle direction (its
+/// components along two unit vectors perpendicular to the target direction `z`, unit).
+fn inverse_tilted(
+    geometry: &Geometry,
+    tip: &Point3<f64>,
+    z: &Vector3<f64>,
+    near: &Joints,
+) -> Result<Joints, KinematicsError> {
+    let mut untilted = geometry.clone();
+    untilted.axis_tilt = [[0.0; 2]; 5];
+    let mut q = inverse(&untilted, tip, z, near)?;
+    let across = z.cross(&Vector3::x());
+    let first = if across.norm() > 0.1 {
+        across.normalize()
+    } else {
+        z.cross(&Vector3::y()).normalize()
+    };
+    let second = z.cross(&first);
+    let equations = |q: &Joints| -> Option<nalgebra::Vector5<f64>> {
+        let chain = needle_chain(geometry, q).ok()?;
+        let d = chain.tip - tip.coords;
+        let axis = chain.axes[2];
+        Some(nalgebra::Vector5::new(
+            d.x,
+            d.y,
+            d.z,
+            axis.dot(&first),
+            axis.dot(&second),
+        ))
+    };
+    for _ in 0..TILTED_IK_ITERATIONS {
+        if reproduces(geometry, &q, &tip.coords, z) {
+            return Ok(q);
+        }
+        let f = equations(&q).ok_or_else(|| {
+            KinematicsError::Unreachable("the tilted chain leaves its workspace".into())
+        })?;
+        let mut jacobian = nalgebra::Matrix5::zeros();
+        for j in 0..5 {
+            let mut moved = q;
+            moved[j] += TILTED_IK_STEP;
+            let g = equations(&moved).ok_or_else(|| {
+                KinematicsError::Unreachable("the tilted chain leaves its workspace".into())
+            })?;
+            jacobian.set_column(j, &((g - f) / TILTED_IK_STEP));
+        }
+        let step = jacobian.lu().solve(&(-f)).ok_or_else(|| {
+            KinematicsError::Unreachable("singular pose of the tilted chain".into())
+        })?;
+        for (value, delta) in q.iter_mut().zip(step.iter()) {
+            *value += delta;
+        }
+    }
+    if reproduces(geometry, &q, &tip.coords, z) {
+        Ok(q)
+    } else {
+        Err(KinematicsError::Unreachable(format!(
+            "no joint vector of the tilted chain reproduces the target within              {TILTED_IK_ITERATIONS} Newton steps"
+        )))
+    }
 }
 
 /// True when FK of `q` puts the tip within 1e-6 mm of `tip` and the needle along `z`.

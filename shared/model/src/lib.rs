@@ -21,7 +21,8 @@ pub mod urdf;
 pub use effects::linear::EffectSlot;
 pub use effects::spec::{EffectSpec, EffectSpecError};
 pub use effects::{
-    DirectionTracker, Effect, EffectField, JointMotion, Link, DIRECTION_DEAD_BAND_COUNTS,
+    DirectionTracker, Effect, EffectField, EncoderScale, JointMotion, Link,
+    DIRECTION_DEAD_BAND_COUNTS,
 };
 pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
 pub use params::{

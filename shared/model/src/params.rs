@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::effects::{apply_joint_effects, Link};
+use crate::effects::{apply_joint_effects, EncoderScale, Link};
 use crate::{Counts, Effect, JointMotion, Joints, JOINT_COUNT};
 
 /// The only parameter-file format this crate reads and writes.
@@ -33,6 +33,12 @@ pub struct Geometry {
     pub l_n: f64,
     /// `T_Bb_Bf`: pose of the front-stage base in the robot base (mm).
     pub front_base: Isometry3<f64>,
+    /// Joint-axis misalignment (rad), per joint θ1..θ5: two small rotations of the joint's
+    /// axis about the axes perpendicular to it (docs/robot-model.md §3). For θ1, θ2 (axis z
+    /// of `Bf`) and θ4, θ5 (axis z of the back stage plane) the tilt is
+    /// `Rx(tilt[0])·Ry(tilt[1])` in that frame; for θ3 (axis x of `Bb`) it is
+    /// `Ry(tilt[0])·Rz(tilt[1])` in `Bb`. All zero in the paper's model.
+    pub axis_tilt: [[f64; 2]; 5],
 }
 
 /// Encoder-to-joint map of docs/robot-model.md §2: `θ = GR · 2π · counts / cpr + θ_off`.
@@ -203,6 +209,7 @@ impl RobotParams {
                 d_offset: 20.0,
                 l_n: 180.0,
                 front_base: Isometry3::translation(0.0, 0.0, 100.0),
+                axis_tilt: [[0.0; 2]; 5],
             },
             joints: JointCalibration {
                 counts_per_rev: [2000, 2000, 4000, 2000, 2000],
@@ -323,6 +330,17 @@ impl RobotParams {
         self.motor_angles_fractional(&counts.map(|c| c as f64))
     }
 
+    /// The encoder scale (motor angle per count, gear ratio) the history-dependent effects
+    /// use.
+    pub fn encoder_scale(&self) -> EncoderScale {
+        EncoderScale {
+            gear_ratio: self.joints.gear_ratio,
+            motor_rad_per_count: std::array::from_fn(|i| {
+                std::f64::consts::TAU / f64::from(self.joints.counts_per_rev[i])
+            }),
+        }
+    }
+
     /// Motor angles θ_enc = 2π·counts/cpr (rad) from fractional counts (e.g. interpolated).
     pub fn motor_angles_fractional(&self, counts: &[f64; 5]) -> Joints {
         std::array::from_fn(|i| {
@@ -354,7 +372,13 @@ impl RobotParams {
         let motor = self.motor_angles_fractional(counts);
         let paper: Joints =
             std::array::from_fn(|i| self.joints.gear_ratio[i] * motor[i] + offset[i]);
-        Ok(apply_joint_effects(&self.effects, &paper, &motor, motion))
+        Ok(apply_joint_effects(
+            &self.effects,
+            &paper,
+            &motor,
+            &self.encoder_scale(),
+            motion,
+        ))
     }
 
     /// Inverse of [`Self::joints_from_counts`] for a static pose: the (fractional) counts that
@@ -375,10 +399,11 @@ impl RobotParams {
         let ratio = &self.joints.gear_ratio;
         // Fixed point on the motor angles: θ_enc = (q − θ_off − Δ(θ_enc)) / GR, where Δ is the
         // (small, slowly varying) joint-side effect; it converges when |∂Δ/∂θ_enc| < |GR|.
+        let scale = self.encoder_scale();
         let mut motor: Joints = std::array::from_fn(|i| (q[i] - offset[i]) / ratio[i]);
         for _ in 0..EFFECT_INVERSION_ITERATIONS {
             let paper: Joints = std::array::from_fn(|i| ratio[i] * motor[i] + offset[i]);
-            let actual = apply_joint_effects(&self.effects, &paper, &motor, motion);
+            let actual = apply_joint_effects(&self.effects, &paper, &motor, &scale, motion);
             let mut largest_error: f64 = 0.0;
             for i in 0..JOINT_COUNT {
                 let error = q[i] - actual[i];
@@ -402,19 +427,25 @@ impl RobotParams {
         })
     }
 
-    /// The geometry with link-length effects applied (what FK/IK should use).
+    /// The geometry with link-length and axis-tilt effects applied (what FK/IK should use).
     pub fn effective_geometry(&self) -> Geometry {
         let mut geometry = self.geometry.clone();
         for effect in &self.effects {
-            if let Effect::LinkLength { link, delta } = *effect {
-                let length = match link {
-                    Link::LF => &mut geometry.l_f,
-                    Link::LFe => &mut geometry.l_fe,
-                    Link::LB => &mut geometry.l_b,
-                    Link::LBe => &mut geometry.l_be,
-                    Link::DOffset => &mut geometry.d_offset,
-                };
-                *length += delta;
+            match *effect {
+                Effect::LinkLength { link, delta } => {
+                    let length = match link {
+                        Link::LF => &mut geometry.l_f,
+                        Link::LFe => &mut geometry.l_fe,
+                        Link::LB => &mut geometry.l_b,
+                        Link::LBe => &mut geometry.l_be,
+                        Link::DOffset => &mut geometry.d_offset,
+                    };
+                    *length += delta;
+                }
+                Effect::AxisTilt { joint, axis, angle } if joint < JOINT_COUNT && axis < 2 => {
+                    geometry.axis_tilt[joint][axis] += angle;
+                }
+                _ => {}
             }
         }
         geometry
@@ -599,6 +630,7 @@ impl ParamsFile {
                 d_offset: g.d_offset,
                 l_n: g.l_n,
                 front_base: pose(g.front_base_translation, g.front_base_rotation),
+                axis_tilt: [[0.0; 2]; 5],
             },
             joints: JointCalibration {
                 counts_per_rev: self.joints.counts_per_rev,

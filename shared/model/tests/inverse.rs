@@ -234,3 +234,64 @@ fn extreme_finite_inputs_are_refused_not_nan() {
         }
     }
 }
+
+/// The nominal geometry with every joint axis tilted (rad).
+fn with_axis_tilts(tilt: [[f64; 2]; 5]) -> Geometry {
+    let mut geometry = nominal();
+    geometry.axis_tilt = tilt;
+    geometry
+}
+
+proptest::proptest! {
+    /// With tilted joint axes (up to 1°), inverse kinematics reproduces forward kinematics.
+    #[test]
+    fn inverse_undoes_forward_with_tilted_axes(
+        dq in proptest::array::uniform5(-0.15f64..0.15),
+        tilt in proptest::array::uniform10(-0.0175f64..0.0175),
+    ) {
+        let geometry = with_axis_tilts(std::array::from_fn(|j| [tilt[2 * j], tilt[2 * j + 1]]));
+        let q: [f64; 5] = std::array::from_fn(|i| HOME_JOINTS[i] + dq[i]);
+        let pose = forward(&geometry, &q).unwrap();
+        let solved = inverse(&geometry, &pose.tip, &pose.direction, &HOME_JOINTS).unwrap();
+        let again = forward(&geometry, &solved).unwrap();
+        proptest::prop_assert!((again.tip - pose.tip).norm() < 1e-6);
+        proptest::prop_assert!((again.direction.into_inner() - pose.direction.into_inner()).norm() < 1e-8);
+        for i in 0..5 {
+            proptest::prop_assert!((solved[i] - q[i]).abs() < 1e-6, "joint {}: {} vs {}", i + 1, solved[i], q[i]);
+        }
+    }
+}
+
+/// A small tilt of θ1 lifts the front effector out of the plane of `Bf` to first order and
+/// moves the tip; a target out of reach is still refused with tilted axes.
+#[test]
+fn tilts_act_to_first_order_and_unreachable_targets_stay_refused() {
+    let q = HOME_JOINTS;
+    let plain = forward(&nominal(), &q).unwrap();
+    for tilt in [1e-4, 2e-4, 4e-4] {
+        let mut t = [[0.0; 2]; 5];
+        t[0][0] = tilt;
+        let moved = forward(&with_axis_tilts(t), &q).unwrap();
+        let shift = (moved.tip - plain.tip).norm();
+        assert!(shift > 0.0, "a tilt of θ1 moves the tip");
+        // The front effector leaves the plane of Bf by ≈ l_f·sinθ1·tilt (about x).
+        let out_of_plane = (nominal().front_base.inverse()
+            * Point3::from(moved.front_effector.translation.vector))
+        .z;
+        let expected = 50.0 * q[0].sin() * tilt;
+        assert!(
+            (out_of_plane - expected).abs() < 1e-3 * tilt.abs() * 50.0,
+            "{out_of_plane} vs {expected}"
+        );
+    }
+    let mut t = [[0.0; 2]; 5];
+    t[2] = [0.01, -0.01];
+    let far = nalgebra::Point3::new(0.0, -90.0, 400.0);
+    assert!(inverse(
+        &with_axis_tilts(t),
+        &far,
+        &nalgebra::Vector3::z(),
+        &HOME_JOINTS
+    )
+    .is_err());
+}

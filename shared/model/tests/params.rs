@@ -257,6 +257,7 @@ fn counts_and_joints_invert_each_other_with_effects() {
     let params = calibrated();
     let motion = sabr_model::JointMotion {
         direction: [1.0, -1.0, 0.0, 1.0, -1.0],
+        ..sabr_model::JointMotion::default()
     };
     let q = [-2.3, -0.8, 0.05, -2.7, -0.6];
     let counts = params.counts_from_joints(&q, &motion).unwrap();

@@ -7,8 +7,9 @@ use std::f64::consts::PI;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sabr_model::effects::{apply_joint_effects, JointMotion};
+use sabr_model::effects::{apply_joint_effects, EncoderScale, JointMotion};
 use sabr_model::plan::{SessionPlan, EXCITATION_AMPLITUDE};
+use sabr_model::Effect;
 use sabr_model::{
     forward, inverse, Counts, Geometry, Joints, KinematicsError, NeedlePose, RobotParams,
 };
@@ -318,9 +319,6 @@ pub fn quantise_counts(motor: &Joints, counts_per_rev: &[u32; 5]) -> Counts {
     std::array::from_fn(|i| (motor[i] * f64::from(counts_per_rev[i]) / (2.0 * PI)).round() as i64)
 }
 
-/// Motor steps smaller than this (rad) do not change the remembered direction of motion.
-const MOTION_THRESHOLD_RAD: f64 = 1e-9;
-
 /// The true robot in operation: motor setpoints in, true motor angles, counts, joints and
 /// poses out. Times are robot time (ns since power-up).
 #[derive(Debug, Clone)]
@@ -328,8 +326,15 @@ pub struct TrueRobot {
     truth: RobotTruth,
     geometry: Geometry,
     motor: Joints,
-    motion: JointMotion,
     t_ns: i64,
+    /// The injected joint-side effects other than backlash.
+    smooth_effects: Vec<Effect>,
+    scale: EncoderScale,
+    /// Half the backlash width of each joint (rad, 0 without backlash).
+    play_half_width: Joints,
+    /// The play operator's output per joint: the paper joint angle the gap lets through
+    /// (rad), carried through time.
+    play_output: Joints,
 }
 
 /// True tool poses in `Bb` at one instant.
@@ -345,14 +350,29 @@ pub struct ToolPoses {
 
 impl TrueRobot {
     /// The robot at power-up: motor angles and counts zero, at its power-up pose.
+    /// Each joint's backlash is a play operator whose gap is centred at power-up.
     pub fn new(truth: RobotTruth) -> Self {
         let geometry = truth.params.effective_geometry();
+        let mut play_half_width = [0.0; 5];
+        let mut smooth_effects = Vec::new();
+        for effect in &truth.params.effects {
+            match *effect {
+                Effect::Backlash { joint, width } if joint < 5 => {
+                    play_half_width[joint] += 0.5 * width;
+                }
+                _ => smooth_effects.push(effect.clone()),
+            }
+        }
+        let motor = [0.0; 5];
         TrueRobot {
+            play_output: truth.paper_joints(&motor),
+            scale: truth.params.encoder_scale(),
             truth,
             geometry,
-            motor: [0.0; 5],
-            motion: JointMotion::default(),
+            motor,
             t_ns: 0,
+            smooth_effects,
+            play_half_width,
         }
     }
 
@@ -373,11 +393,13 @@ impl TrueRobot {
             } else {
                 setpoint[i]
             };
-            let step = target - self.motor[i];
-            if step.abs() > MOTION_THRESHOLD_RAD {
-                self.motion.direction[i] = step.signum();
-            }
             self.motor[i] = target;
+        }
+        // The motors move monotonically between commands, so clamping at the end of the
+        // step is the play operator along it.
+        let x = self.truth.paper_joints(&self.motor);
+        for (i, h) in self.play_half_width.iter().enumerate() {
+            self.play_output[i] = self.play_output[i].clamp(x[i] - h, x[i] + h);
         }
         self.t_ns = t_ns;
     }
@@ -392,11 +414,6 @@ impl TrueRobot {
         self.motor
     }
 
-    /// Direction of the last motion of each joint (for history-dependent effects).
-    pub fn motion(&self) -> JointMotion {
-        self.motion
-    }
-
     /// Encoder counts of the current motor angles.
     pub fn counts(&self) -> Counts {
         quantise_counts(&self.motor, &self.truth.params.joints.counts_per_rev)
@@ -407,15 +424,21 @@ impl TrueRobot {
         self.truth.paper_joints(&self.motor)
     }
 
-    /// True joint angles (rad): paper joints plus the injected joint-side effects (model
-    /// effects as `sabr_model::effects` defines them, then thermal drift).
+    /// True joint angles (rad): paper joints plus the injected joint-side effects (ripple
+    /// and compliance as `sabr_model::effects` defines them, backlash as the play operator
+    /// run through every commanded step, then thermal drift).
     pub fn joints(&self) -> Joints {
+        let paper = self.paper_joints();
         let mut q = apply_joint_effects(
-            &self.truth.params.effects,
-            &self.paper_joints(),
+            &self.smooth_effects,
+            &paper,
             &self.motor,
-            &self.motion,
+            &self.scale,
+            &JointMotion::default(),
         );
+        for i in 0..5 {
+            q[i] += self.play_output[i] - paper[i];
+        }
         for drift in &self.truth.thermal {
             q[drift.joint] += drift.drift_at(self.t_ns);
         }

@@ -21,12 +21,13 @@ fn robots(spec: &str) -> (TrueRobot, TrueRobot) {
     (TrueRobot::new(a), TrueRobot::new(b))
 }
 
-/// Motor setpoints (rad) sweeping every joint up, then back down.
-fn sweep(robot: &TrueRobot) -> Vec<Joints> {
+/// Motor setpoints (rad) sweeping every joint up by 0.1 rad, then back down, in `2·half`
+/// steps.
+fn sweep(robot: &TrueRobot, half: usize) -> Vec<Joints> {
     let centre = robot.truth().power_up_joints;
-    (0..40)
+    (0..2 * half)
         .map(|k| {
-            let s = if k < 20 { k as f64 } else { 40.0 - k as f64 } / 20.0;
+            let s = if k < half { k } else { 2 * half - k } as f64 / half as f64;
             let q: Joints =
                 std::array::from_fn(|i| centre[i] - 0.1 * s * robot.truth().stop_side[i]);
             robot.truth().motor_for_joints(&q)
@@ -40,7 +41,17 @@ fn drive(
     with: &mut TrueRobot,
     mut check: impl FnMut(&TrueRobot, &TrueRobot),
 ) {
-    for (k, setpoint) in sweep(plain).iter().enumerate() {
+    drive_in_steps(plain, with, 20, &mut check);
+}
+
+/// [`drive`] with `2·half` setpoints.
+fn drive_in_steps(
+    plain: &mut TrueRobot,
+    with: &mut TrueRobot,
+    half: usize,
+    check: &mut impl FnMut(&TrueRobot, &TrueRobot),
+) {
+    for (k, setpoint) in sweep(plain, half).iter().enumerate() {
         let t_ns = (k as i64 + 1) * 100_000_000;
         plain.command(t_ns, setpoint);
         with.command(t_ns, setpoint);
@@ -72,23 +83,29 @@ fn ripple_adds_amplitude_times_sine_of_harmonic_motor_angle() {
     assert!(largest > 0.0015, "{largest}");
 }
 
+/// Backlash is a play operator: the joint lags half the gap behind the motion and, after a
+/// reversal, holds still until the motor has crossed the whole gap.
 #[test]
-fn backlash_lags_half_the_width_behind_the_motion() {
+fn backlash_is_a_play_operator_with_memory() {
+    let width = 0.004;
     let (mut plain, mut with) = robots("backlash:joint=4,width=0.004");
     assert_only(3, &difference(&plain, &with), 0.0);
-    let mut previous = with.motor_angles()[3];
-    let mut direction = 0.0;
-    let mut signs = Vec::new();
-    drive(&mut plain, &mut with, |a, b| {
-        let motor = b.motor_angles()[3];
-        if motor != previous {
-            direction = (motor - previous).signum();
+    // The reference play operator, run on the paper joint angle, centred at power-up.
+    let mut output = with.paper_joints()[3];
+    let (mut held, mut lagging) = (0, 0);
+    // Steps of 0.5 mrad, so the reversal's first steps stay inside the 4 mrad gap.
+    drive_in_steps(&mut plain, &mut with, 200, &mut |a, b| {
+        let x = a.paper_joints()[3];
+        let previous = output;
+        output = output.clamp(x - 0.5 * width, x + 0.5 * width);
+        assert_only(3, &difference(a, b), output - x);
+        if output == previous && (output - x).abs() < 0.5 * width - 1e-9 {
+            held += 1;
+        } else if ((output - x).abs() - 0.5 * width).abs() < 1e-12 {
+            lagging += 1;
         }
-        previous = motor;
-        assert_only(3, &difference(a, b), -0.002 * direction);
-        signs.push(direction);
     });
-    assert!(signs.contains(&1.0) && signs.contains(&-1.0), "{signs:?}");
+    assert!(held > 0 && lagging > 0, "held {held}, lagging {lagging}");
 }
 
 #[test]

@@ -8,7 +8,11 @@
 //! extremum count for a smooth turn, but no earlier than [`SMOOTH_TURN_HALF_NS`] before the
 //! motor left that count (after a dwell the motor turns when it starts to move again).
 //! Before its first motion a joint's direction is 0 (unknown).
+//!
+//! Each change also records the count where the joint turned (the extremum), so that the
+//! backlash play operator sees the joint's recent turning points.
 
+use sabr_model::effects::play::PlayMemory;
 use sabr_model::JointMotion;
 
 /// Longest half-duration (ns) of a smooth turn within one count; a longer stay at the
@@ -18,8 +22,9 @@ pub const SMOOTH_TURN_HALF_NS: f64 = 1e8;
 /// Direction changes of every joint over a recording.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct MotionTrack {
-    /// Per joint: `(host time ns from which it holds, direction ±1)`, in time order.
-    changes: [Vec<(f64, f64)>; 5],
+    /// Per joint: `(host time ns from which it holds, direction ±1, turning points so far)`,
+    /// in time order.
+    changes: [Vec<(f64, f64, PlayMemory)>; 5],
 }
 
 /// Running state of one joint.
@@ -40,6 +45,7 @@ impl MotionTrack {
             return track;
         };
         for joint in 0..5 {
+            let mut memory = PlayMemory::default();
             let mut state = JointState {
                 direction: 0.0,
                 extremum: first[joint],
@@ -69,7 +75,8 @@ impl MotionTrack {
                     );
                     let turned_at = (0.5 * (entered + left)).max(left - SMOOTH_TURN_HALF_NS);
                     let direction = (count - state.extremum).signum() as f64;
-                    track.changes[joint].push((turned_at, direction));
+                    memory.push(state.extremum as f64, state.direction == 0.0);
+                    track.changes[joint].push((turned_at, direction, memory));
                     state = JointState {
                         direction,
                         extremum: count,
@@ -82,19 +89,18 @@ impl MotionTrack {
         track
     }
 
-    /// The direction of every joint at host time `t_ns`.
+    /// The direction and recent turning points of every joint at host time `t_ns`.
     pub fn at(&self, t_ns: f64) -> JointMotion {
-        JointMotion {
-            direction: std::array::from_fn(|joint| {
-                let changes = &self.changes[joint];
-                let i = changes.partition_point(|(t, _)| *t <= t_ns);
-                if i == 0 {
-                    0.0
-                } else {
-                    changes[i - 1].1
-                }
-            }),
+        let mut motion = JointMotion::default();
+        for (joint, changes) in self.changes.iter().enumerate() {
+            let i = changes.partition_point(|(t, _, _)| *t <= t_ns);
+            if i > 0 {
+                let (_, direction, memory) = changes[i - 1];
+                motion.direction[joint] = direction;
+                motion.turns[joint] = memory;
+            }
         }
+        motion
     }
 
     /// Number of direction changes of each joint.

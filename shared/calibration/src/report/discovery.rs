@@ -14,6 +14,7 @@ use crate::math::stats::ErrorSummary;
 use crate::model::biopsy::validation::{marker_tip_errors, validation_holds};
 use crate::model::biopsy::{BiopsyModel, BACK, FRONT, TIP};
 use crate::model::NoiseModel;
+use crate::report::hysteresis::HysteresisDiagnostic;
 use crate::report::plots::Plots;
 use crate::report::{model_residuals, ModelResiduals, Report};
 
@@ -133,6 +134,8 @@ pub struct FinalReport {
     pub strongest_correlates: Vec<Correlate>,
     /// One-sentence conclusion.
     pub verdict: String,
+    /// Hysteresis diagnostics of the final model's residual, per joint.
+    pub hysteresis: Vec<HysteresisDiagnostic>,
     /// Data of the report's plots (not written to `report.json`).
     #[serde(skip)]
     pub plots: Plots,
@@ -151,6 +154,12 @@ impl FinalReport {
             leads: discovery.leads.clone(),
             strongest_correlates: discovery.strongest_correlates.clone(),
             verdict: discovery.verdict.clone(),
+            hysteresis: plots
+                .after
+                .as_ref()
+                .or(plots.before.as_ref())
+                .map(|p| p.hysteresis.to_vec())
+                .unwrap_or_default(),
             plots,
         }
     }

@@ -7,6 +7,7 @@
 pub mod discovery;
 pub mod discovery_html;
 pub mod html;
+pub mod hysteresis;
 pub mod output;
 pub mod plots;
 pub mod serial;

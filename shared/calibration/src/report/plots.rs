@@ -9,6 +9,7 @@ use crate::model::biopsy::candidates::joint_derivatives;
 use crate::model::biopsy::predict::joint_angles;
 use crate::model::biopsy::BiopsyModel;
 use crate::model::NoiseModel;
+use crate::report::hysteresis::{HysteresisDiagnostic, MotionSample};
 
 /// Most points kept per scatter plot.
 const MAX_POINTS: usize = 800;
@@ -40,6 +41,9 @@ pub struct ResidualPicture {
     pub outside: f64,
     /// RMS of the whitened residual components (1 = tracker noise).
     pub whitened_rms: f64,
+    /// Per joint: the joint errors per direction of motion and along the travel since the
+    /// last reversal.
+    pub hysteresis: [HysteresisDiagnostic; 5],
 }
 
 /// One frame in a joint-error plot.
@@ -107,6 +111,8 @@ pub fn picture(
 ) -> ResidualPicture {
     let joint_derivatives: DMatrix<f64> = joint_derivatives(&fit.model, &fit.problem());
     let mut all: [Vec<JointErrorPoint>; 5] = Default::default();
+    let mut motion_samples: [Vec<MotionSample>; 5] = Default::default();
+    let scale = fit.model.robot.encoder_scale();
     for group in fit.blocks.chunk_by(|a, b| a.obs == b.obs) {
         if group.len() < 2 {
             continue;
@@ -125,11 +131,21 @@ pub fn picture(
         };
         let obs = &fit.observations[group[0].obs];
         let q = joint_angles(&fit.model, obs);
+        let counts = obs.counts_at_latency(fit.model.latency_s);
         for (j, points) in all.iter_mut().enumerate() {
             points.push(JointErrorPoint {
                 angle: q[j],
                 error_mrad: -solved[j] * 1e3,
                 class: direction_class(obs.motion.direction[j]),
+            });
+            let joint_per_count = scale.gear_ratio[j].abs() * scale.motor_rad_per_count[j];
+            motion_samples[j].push(MotionSample {
+                error_mrad: -solved[j] * 1e3,
+                direction: obs.motion.direction[j],
+                travel_mrad: obs
+                    .motion
+                    .travel_since_turn(j, counts[j])
+                    .map(|c| c * joint_per_count * 1e3),
             });
         }
     }
@@ -166,5 +182,6 @@ pub fn picture(
             .collect(),
         outside: outside as f64 / n,
         whitened_rms: (sum / n).sqrt(),
+        hysteresis: std::array::from_fn(|j| HysteresisDiagnostic::of(j, &motion_samples[j])),
     }
 }

@@ -35,11 +35,18 @@ pub enum EffectSlot {
         /// The link.
         link: Link,
     },
+    /// Tilt of a joint's axis about one of its two perpendicular axes (0 or 1).
+    AxisTilt {
+        /// Joint index 0..5.
+        joint: usize,
+        /// Which perpendicular axis, 0 or 1.
+        axis: usize,
+    },
 }
 
 impl EffectSlot {
     /// Every slot of the library: per joint the ripple harmonics, backlash and compliance,
-    /// then every link.
+    /// then every link, then both tilts of every joint axis.
     pub fn all() -> Vec<EffectSlot> {
         let mut all = Vec::new();
         for joint in 0..JOINT_COUNT {
@@ -50,6 +57,9 @@ impl EffectSlot {
             all.push(EffectSlot::JointCompliance { joint });
         }
         all.extend(Link::ALL.map(|link| EffectSlot::LinkLength { link }));
+        for joint in 0..JOINT_COUNT {
+            all.extend([0, 1].map(|axis| EffectSlot::AxisTilt { joint, axis }));
+        }
         all
     }
 
@@ -65,6 +75,7 @@ impl EffectSlot {
             Effect::Backlash { joint, .. } => EffectSlot::Backlash { joint },
             Effect::LinkLength { link, .. } => EffectSlot::LinkLength { link },
             Effect::JointCompliance { joint, .. } => EffectSlot::JointCompliance { joint },
+            Effect::AxisTilt { joint, axis, .. } => EffectSlot::AxisTilt { joint, axis },
         }
     }
 
@@ -75,6 +86,7 @@ impl EffectSlot {
             EffectSlot::Backlash { .. } => "backlash",
             EffectSlot::JointCompliance { .. } => "joint_compliance",
             EffectSlot::LinkLength { .. } => "link_length",
+            EffectSlot::AxisTilt { .. } => "axis_tilt",
         }
     }
 
@@ -91,7 +103,8 @@ impl EffectSlot {
         match self {
             EffectSlot::TransmissionRipple { joint, .. }
             | EffectSlot::Backlash { joint }
-            | EffectSlot::JointCompliance { joint } => Some(joint),
+            | EffectSlot::JointCompliance { joint }
+            | EffectSlot::AxisTilt { joint, .. } => Some(joint),
             EffectSlot::LinkLength { .. } => None,
         }
     }
@@ -99,7 +112,8 @@ impl EffectSlot {
     /// `∂q_joint/∂p_k` of a joint-side slot at motor angles `motor` (rad), paper joints
     /// `joints` (rad) and motion state `motion`: ripple `[sin hθ_enc, cos hθ_enc]` (in-phase
     /// and quadrature amplitudes), backlash `[−direction/2]` (per unit width), compliance
-    /// `[gravity feature]` (per unit gain). Zeros for a link (it acts through the geometry).
+    /// `[gravity feature]` (per unit gain). Zeros for a link or an axis tilt (they act
+    /// through the geometry).
     pub fn joint_signals(self, motor: &Joints, joints: &Joints, motion: &JointMotion) -> [f64; 2] {
         match self {
             EffectSlot::TransmissionRipple { joint, harmonic } => {
@@ -108,7 +122,7 @@ impl EffectSlot {
             }
             EffectSlot::Backlash { joint } => [-0.5 * motion.direction[joint], 0.0],
             EffectSlot::JointCompliance { joint } => [gravity_feature(joint, joints), 0.0],
-            EffectSlot::LinkLength { .. } => [0.0, 0.0],
+            EffectSlot::LinkLength { .. } | EffectSlot::AxisTilt { .. } => [0.0, 0.0],
         }
     }
 
@@ -138,6 +152,11 @@ impl EffectSlot {
                 link,
                 delta: coefficients[0],
             }),
+            EffectSlot::AxisTilt { joint, axis } => Some(Effect::AxisTilt {
+                joint,
+                axis,
+                angle: coefficients[0],
+            }),
         }
     }
 }
@@ -156,14 +175,22 @@ mod tests {
     fn joint_signals_linearise_the_applied_effects() {
         let motion = JointMotion {
             direction: [1.0, -1.0, 1.0, -1.0, 1.0],
+            ..JointMotion::default()
+        };
+        let scale = crate::effects::EncoderScale {
+            gear_ratio: [0.1; 5],
+            motor_rad_per_count: [1e-3; 5],
         };
         for slot in EffectSlot::all() {
+            if matches!(slot, EffectSlot::AxisTilt { .. }) {
+                continue;
+            }
             let Some(joint) = slot.joint() else { continue };
             let coefficients = [1e-4, -2e-4];
             let effect = slot
                 .effect(&coefficients[..slot.dim()])
                 .expect("a valid effect");
-            let q = apply_joint_effects(std::slice::from_ref(&effect), &Q, &MOTOR, &motion);
+            let q = apply_joint_effects(std::slice::from_ref(&effect), &Q, &MOTOR, &scale, &motion);
             let s = slot.joint_signals(&MOTOR, &Q, &motion);
             let linear: f64 = (0..slot.dim()).map(|k| s[k] * coefficients[k]).sum();
             assert!(
@@ -174,7 +201,7 @@ mod tests {
             assert_eq!(EffectSlot::of(&effect), slot);
             assert_eq!(slot.class(), effect.class());
         }
-        assert_eq!(EffectSlot::all().len(), 5 * 5 + 5);
+        assert_eq!(EffectSlot::all().len(), 5 * 5 + 5 + 10);
         assert!(EffectSlot::Backlash { joint: 0 }.effect(&[-0.01]).is_none());
     }
 }

@@ -5,11 +5,13 @@
 //! ([`linear`]).
 
 pub mod linear;
+pub mod play;
 pub mod spec;
 
 use serde::{Deserialize, Serialize};
 
 use crate::JOINT_COUNT;
+use play::{play_output, PlayMemory};
 
 /// A link of the 5-bars (or the needle offset) whose length an effect may change.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -49,11 +51,23 @@ impl Link {
 }
 
 /// Motion state that history-dependent effects need: per joint, the sign (−1, 0, +1) of the
-/// last significant motor velocity.
+/// last significant motor velocity and the recent turning points of its encoder count.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct JointMotion {
     /// Sign of the last motion of each joint (0 = unknown / never moved).
     pub direction: [f64; 5],
+    /// Per joint: encoder counts where its direction last changed (the play operator's
+    /// memory, see [`play`]).
+    pub turns: [PlayMemory; 5],
+}
+
+impl JointMotion {
+    /// Distance (encoder counts, ≥ 0) joint `joint` has travelled since its last turning
+    /// point, at `counts`; `None` before it has moved.
+    pub fn travel_since_turn(&self, joint: usize, counts: f64) -> Option<f64> {
+        let last = *self.turns[joint].turns().first()?;
+        Some((counts - last).abs())
+    }
 }
 
 /// Encoder counts a joint must move back from its last extremum before its direction of
@@ -94,6 +108,7 @@ impl DirectionTracker {
             if moved * *direction > 0.0 {
                 extremum[joint] = counts[joint];
             } else if moved.abs() >= self.dead_band_counts {
+                self.motion.turns[joint].push(extremum[joint], *direction == 0.0);
                 *direction = moved.signum();
                 extremum[joint] = counts[joint];
             }
@@ -118,7 +133,9 @@ pub enum Effect {
         /// Phase (rad).
         phase: f64,
     },
-    /// Backlash: the joint lags by `width/2` behind the motor in the direction of motion.
+    /// Backlash, a play operator of full width `width`: the joint lags by `width/2` behind
+    /// the motor while it moves; after a reversal it stays put until the motor has crossed
+    /// the whole gap (see [`play`]).
     Backlash {
         /// Joint index 0..5.
         joint: usize,
@@ -131,6 +148,17 @@ pub enum Effect {
         link: Link,
         /// Added length (mm).
         delta: f64,
+    },
+    /// Joint-axis misalignment: the axis of `joint` turned by `angle` about the first
+    /// (`axis = 0`) or second (`axis = 1`) axis perpendicular to it (see
+    /// [`Geometry::axis_tilt`](crate::Geometry::axis_tilt)).
+    AxisTilt {
+        /// Joint index 0..5.
+        joint: usize,
+        /// Which perpendicular axis, 0 or 1.
+        axis: usize,
+        /// Tilt angle (rad).
+        angle: f64,
     },
     /// Joint compliance under gravity: adds `gain · g_i(q)` where `g_i` is the joint's
     /// normalised gravity-torque feature (see [`gravity_feature`]).
@@ -164,12 +192,24 @@ pub fn gravity_feature(joint: usize, q: &crate::Joints) -> f64 {
     }
 }
 
+/// How encoder counts become joint angles (docs/robot-model.md §2), as the history-dependent
+/// effects need it: the motor angle per count `2π / cpr` (rad) and the gear ratio `GR`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EncoderScale {
+    /// Gear ratio joint/motor of each joint.
+    pub gear_ratio: crate::Joints,
+    /// Motor angle per encoder count of each joint (rad).
+    pub motor_rad_per_count: crate::Joints,
+}
+
 /// Applies the joint-side effects (ripple, backlash, compliance) of `effects` to the
-/// paper-model joint angles `q_paper` (rad), given the motor angles θ_enc (rad) and the
-/// motion state. Link-length effects are not joint-side and are ignored here.
+/// paper-model joint angles `q_paper` (rad), given the motor angles θ_enc (rad), the
+/// encoder `scale` and the motion state. Link-length effects are not joint-side and are ignored here.
 ///
 /// - ripple adds `amplitude · sin(harmonic · θ_enc,j + phase)`;
-/// - backlash subtracts `direction_j · width/2` (the joint lags behind the motor);
+/// - backlash adds `y − x`, the play operator's output `y` minus its input `x = q_paper,j`
+///   ([`play::play_output`] over the joint's turning points): `−direction·width/2` in
+///   steady motion, unchanged from before a reversal until the motor has crossed the gap;
 /// - compliance adds `gain · gravity_feature(j, q_paper)` (the deflection is small, so the
 ///   feature is evaluated at the undeflected joints).
 ///
@@ -178,6 +218,7 @@ pub fn apply_joint_effects(
     effects: &[Effect],
     q_paper: &crate::Joints,
     motor_angles: &crate::Joints,
+    scale: &EncoderScale,
     motion: &JointMotion,
 ) -> crate::Joints {
     let mut q = *q_paper;
@@ -192,7 +233,8 @@ pub fn apply_joint_effects(
                 q[joint] += amplitude * (harmonic * motor_angles[joint] + phase).sin();
             }
             Effect::Backlash { joint, width } if joint < JOINT_COUNT => {
-                q[joint] -= motion.direction[joint] * 0.5 * width;
+                q[joint] +=
+                    backlash_offset(joint, width, q_paper[joint], motor_angles, scale, motion);
             }
             Effect::JointCompliance { joint, gain } if joint < JOINT_COUNT => {
                 q[joint] += gain * gravity_feature(joint, q_paper);
@@ -201,6 +243,33 @@ pub fn apply_joint_effects(
         }
     }
     q
+}
+
+/// `y − x` (rad) of the play operator of full width `width` on joint `joint` (see
+/// [`apply_joint_effects`]).
+fn backlash_offset(
+    joint: usize,
+    width: f64,
+    x: f64,
+    motor_angles: &crate::Joints,
+    scale: &EncoderScale,
+    motion: &JointMotion,
+) -> f64 {
+    let memory = &motion.turns[joint];
+    // The input at a turning point: x moved back by the joint travel since then.
+    let (ratio, per_count) = (scale.gear_ratio[joint], scale.motor_rad_per_count[joint]);
+    let mut turns_rad = [0.0; play::PLAY_MEMORY];
+    let turns = memory.turns();
+    for (slot, &turn) in turns_rad.iter_mut().zip(turns) {
+        *slot = x - ratio * (motor_angles[joint] - per_count * turn);
+    }
+    play_output(
+        0.5 * width,
+        x,
+        motion.direction[joint],
+        &turns_rad[..turns.len()],
+        memory.starts_from_rest(),
+    ) - x
 }
 
 /// A numeric field of an [`Effect`]: what a fit moves.
@@ -216,6 +285,8 @@ pub enum EffectField {
     Delta,
     /// Compliance gain (rad per unit gravity feature).
     Gain,
+    /// Axis tilt angle (rad).
+    Angle,
 }
 
 impl EffectField {
@@ -227,6 +298,7 @@ impl EffectField {
             EffectField::Width => "width",
             EffectField::Delta => "delta",
             EffectField::Gain => "gain",
+            EffectField::Angle => "angle",
         }
     }
 
@@ -248,6 +320,7 @@ impl Effect {
             Effect::Backlash { .. } => "backlash",
             Effect::LinkLength { .. } => "link_length",
             Effect::JointCompliance { .. } => "joint_compliance",
+            Effect::AxisTilt { .. } => "axis_tilt",
         }
     }
 
@@ -258,6 +331,7 @@ impl Effect {
             Effect::Backlash { .. } => &[EffectField::Width],
             Effect::LinkLength { .. } => &[EffectField::Delta],
             Effect::JointCompliance { .. } => &[EffectField::Gain],
+            Effect::AxisTilt { .. } => &[EffectField::Angle],
         }
     }
 
@@ -271,6 +345,7 @@ impl Effect {
             (Effect::Backlash { width, .. }, EffectField::Width) => Some(*width),
             (Effect::LinkLength { delta, .. }, EffectField::Delta) => Some(*delta),
             (Effect::JointCompliance { gain, .. }, EffectField::Gain) => Some(*gain),
+            (Effect::AxisTilt { angle, .. }, EffectField::Angle) => Some(*angle),
             _ => None,
         }
     }
@@ -284,6 +359,7 @@ impl Effect {
             (Effect::Backlash { width, .. }, EffectField::Width) => width,
             (Effect::LinkLength { delta, .. }, EffectField::Delta) => delta,
             (Effect::JointCompliance { gain, .. }, EffectField::Gain) => gain,
+            (Effect::AxisTilt { angle, .. }, EffectField::Angle) => angle,
             _ => return false,
         };
         *slot = value;
@@ -317,6 +393,12 @@ impl Effect {
             }
             Effect::LinkLength { delta, .. } => (None, vec![("delta", delta)]),
             Effect::JointCompliance { joint, gain } => (Some(joint), vec![("gain", gain)]),
+            Effect::AxisTilt { joint, axis, angle } => {
+                if axis > 1 {
+                    return Err(format!("axis tilt axis must be 0 or 1, got {axis}"));
+                }
+                (Some(joint), vec![("angle", angle)])
+            }
         };
         if let Some(joint) = joint {
             if joint >= JOINT_COUNT {
@@ -341,8 +423,17 @@ mod tests {
     const Q: crate::Joints = [-2.3, -0.8, 0.1, -2.7, -0.6];
     const MOTOR: crate::Joints = [1.0, -2.0, 3.0, 0.5, 7.0];
 
+    const SCALE: EncoderScale = EncoderScale {
+        gear_ratio: [0.1, 0.1, 0.05, 0.1, 0.1],
+        motor_rad_per_count: [std::f64::consts::TAU / 2000.0; 5],
+    };
+
     fn apply(effects: &[Effect], direction: [f64; 5]) -> crate::Joints {
-        apply_joint_effects(effects, &Q, &MOTOR, &JointMotion { direction })
+        let motion = JointMotion {
+            direction,
+            ..JointMotion::default()
+        };
+        apply_joint_effects(effects, &Q, &MOTOR, &SCALE, &motion)
     }
 
     #[test]
@@ -434,6 +525,57 @@ mod tests {
         assert!((forward[1] - (Q[1] - 0.005)).abs() < 1e-15);
         assert!((backward[1] - (Q[1] + 0.005)).abs() < 1e-15);
         assert_eq!(unknown, Q);
+    }
+
+    /// After a reversal the joint holds still until the motor has crossed the gap: a
+    /// tracker fed a stroke up and back reproduces the play operator through the counts.
+    #[test]
+    fn backlash_holds_the_joint_through_the_gap_after_a_reversal() {
+        let width = 0.01;
+        let effect = Effect::Backlash { joint: 1, width };
+        let joint_per_count = SCALE.gear_ratio[1] * SCALE.motor_rad_per_count[1];
+        let mut tracker = DirectionTracker::new(2.0);
+        let joint_at = |tracker: &mut DirectionTracker, counts: f64| {
+            let all = [0.0, counts, 0.0, 0.0, 0.0];
+            let motion = tracker.update(&all);
+            let motor: crate::Joints =
+                std::array::from_fn(|i| all[i] * SCALE.motor_rad_per_count[i]);
+            let paper: crate::Joints = std::array::from_fn(|i| SCALE.gear_ratio[i] * motor[i]);
+            let q = apply_joint_effects(
+                std::slice::from_ref(&effect),
+                &paper,
+                &motor,
+                &SCALE,
+                &motion,
+            );
+            (paper[1], q[1])
+        };
+        // Up by 1000 counts (0.314 rad at the joint), in steps of one count.
+        let mut last = (0.0, 0.0);
+        for c in 0..=1000 {
+            last = joint_at(&mut tracker, f64::from(c));
+        }
+        assert!(
+            (last.1 - (last.0 - 0.5 * width)).abs() < 1e-12,
+            "lags by half the gap"
+        );
+        let top = last.1;
+        // Back down: the gap is 0.01 / joint_per_count ≈ 31.8 counts wide. A causal tracker
+        // sees the reversal once the count has moved back by its dead band (2 counts).
+        let gap_counts = width / joint_per_count;
+        let late = 2.0 * joint_per_count;
+        for c in (900..1000).rev() {
+            let (x, y) = joint_at(&mut tracker, f64::from(c));
+            let travel = 1000.0 - f64::from(c);
+            if travel < gap_counts - 1.0 {
+                assert!(
+                    (y - top).abs() <= late + 1e-12,
+                    "in the gap after {travel} counts"
+                );
+            } else if travel > gap_counts + 1.0 {
+                assert!((y - (x + 0.5 * width)).abs() < 1e-12, "engaged again");
+            }
+        }
     }
 
     #[test]

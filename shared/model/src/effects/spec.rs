@@ -162,7 +162,7 @@ impl<'a> EffectSpec<'a> {
 
 impl Effect {
     /// The names of the model's effects in the spec syntax.
-    pub const SPEC_NAMES: [&'static str; 4] = ["ripple", "backlash", "link", "compliance"];
+    pub const SPEC_NAMES: [&'static str; 5] = ["ripple", "backlash", "link", "compliance", "tilt"];
 
     /// The model effect `spec` names, with its values; `None` when the name is not one of
     /// [`Effect::SPEC_NAMES`]. Consumes the keys it uses (call [`EffectSpec::finish`] after).
@@ -194,6 +194,19 @@ impl Effect {
                 let joint = spec.joint()?;
                 let gain = spec.bounded("gain", MAX_JOINT_EFFECT_RAD, false)?;
                 Ok(Effect::JointCompliance { joint, gain })
+            })(),
+            "tilt" => (|| {
+                let joint = spec.joint()?;
+                let axis = spec.number("axis", None)?;
+                if axis != 1.0 && axis != 2.0 {
+                    return Err(spec.error(format!("`axis={axis}` must be 1 or 2")));
+                }
+                let angle = spec.bounded("angle", MAX_JOINT_EFFECT_RAD, false)?;
+                Ok(Effect::AxisTilt {
+                    joint,
+                    axis: axis as usize - 1,
+                    angle,
+                })
             })(),
             _ => return None,
         };
@@ -242,6 +255,14 @@ impl fmt::Display for Effect {
             Effect::JointCompliance { joint, gain } => {
                 write!(f, "compliance:joint={},gain={gain}", joint + 1)
             }
+            Effect::AxisTilt { joint, axis, angle } => {
+                write!(
+                    f,
+                    "tilt:joint={},axis={},angle={angle}",
+                    joint + 1,
+                    axis + 1
+                )
+            }
         }
     }
 }
@@ -257,6 +278,7 @@ mod tests {
             "backlash:joint=4,width=0.004",
             "link:link=l_f,delta=0.4",
             "compliance:joint=1,gain=0.003",
+            "tilt:joint=3,axis=2,angle=-0.0087",
         ];
         for spec in specs {
             let effect: Effect = spec.parse().unwrap();
@@ -296,6 +318,7 @@ mod tests {
             ("backlash:joint=2,width", "not of the form key=value"),
             ("link:link=l_x,delta=1", "must be one of l_f"),
             ("link:link=l_f,delta=50", "beyond the plausible limit"),
+            ("tilt:joint=2,axis=3,angle=0.01", "must be 1 or 2"),
         ];
         for (spec, reason) in cases {
             let err = spec.parse::<Effect>().unwrap_err();

@@ -39,16 +39,16 @@ impl FiveBar {
         Self::new(geometry.l_b, geometry.l_be)
     }
 
-    /// Effector point (mm) for joint angles θp, θd (rad).
-    pub(super) fn forward(&self, proximal: f64, distal: f64) -> (f64, f64) {
+    /// The proximal vector (driven by θp) and the distal vector with the effector extension
+    /// (driven by θd), in the stage plane (mm); their sum is the effector point.
+    pub(super) fn link_vectors(&self, proximal: f64, distal: f64) -> [(f64, f64); 2] {
         let (s1, c1) = proximal.sin_cos();
         let (s2, c2) = distal.sin_cos();
-        // cos(θd − π/4), sin(θd − π/4)
         let (ce, se) = ((c2 + s2) * FRAC_1_SQRT_2, (s2 - c2) * FRAC_1_SQRT_2);
-        (
-            self.l * (c1 + c2) + self.l_e * ce,
-            self.l * (s1 + s2) + self.l_e * se,
-        )
+        [
+            (self.l * c1, self.l * s1),
+            (self.l * c2 + self.l_e * ce, self.l * s2 + self.l_e * se),
+        ]
     }
 
     /// Both joint solutions (θp, θd) (rad, not wrapped) reaching the effector point `(x, y)` (mm);

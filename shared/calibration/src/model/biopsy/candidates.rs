@@ -122,6 +122,9 @@ impl Candidate {
         if let Some(link) = self.link() {
             label.push_str(&format!(" {}", link.name()));
         }
+        if let Candidate::Library(EffectSlot::AxisTilt { axis, .. }) = self {
+            label.push_str(&format!(" axis {}", axis + 1));
+        }
         label
     }
 
@@ -134,6 +137,9 @@ impl Candidate {
             Candidate::Library(EffectSlot::Backlash { .. }) => "sign of the joint velocity",
             Candidate::Library(EffectSlot::JointCompliance { .. }) => "gravity-torque feature",
             Candidate::Library(EffectSlot::LinkLength { .. }) => "sensitivity to the link length",
+            Candidate::Library(EffectSlot::AxisTilt { .. }) => {
+                "sensitivity to the tilt of the joint axis"
+            }
             Candidate::JointHarmonic { .. } => "sin/cos of the harmonic of the joint angle",
             Candidate::JointDelay { .. } => "joint velocity",
             Candidate::OffsetDrift { .. } => "time (linear and quadratic)",
@@ -195,6 +201,10 @@ pub fn candidate_columns(
                 let k = Link::ALL.iter().position(|l| *l == link).unwrap_or(0);
                 columns.set_column(col, &derivatives.column(JOINT_COUNT + k));
             }
+            Candidate::Library(EffectSlot::AxisTilt { joint, axis }) => {
+                let k = JOINT_COUNT + Link::ALL.len() + 2 * joint + axis;
+                columns.set_column(col, &derivatives.column(k));
+            }
             Candidate::NeedleSag => needle_sag_column(model, problem, &mut columns, col),
             _ => {
                 for block in problem.blocks {
@@ -222,8 +232,9 @@ pub fn joint_derivatives(model: &BiopsyModel, problem: &Problem<'_, BiopsyModel>
     problem.with_layout(&layout).jacobian(model)
 }
 
-/// The model with a zero link-length effect per link appended, and the layout of the five
-/// joint offsets (whose derivatives are `∂r/∂q_j`) and the five link deltas.
+/// The model with a zero link-length effect per link and a zero tilt per joint axis
+/// appended, and the layout of the five joint offsets (whose derivatives are `∂r/∂q_j`),
+/// the five link deltas and the ten tilt angles (joint-major).
 fn probe_model(model: &BiopsyModel) -> (BiopsyModel, ParamLayout<ParamId>) {
     let mut probe = model.clone();
     let first = probe.robot.effects.len();
@@ -231,12 +242,20 @@ fn probe_model(model: &BiopsyModel) -> (BiopsyModel, ParamLayout<ParamId>) {
         .robot
         .effects
         .extend(Link::ALL.map(|link| Effect::LinkLength { link, delta: 0.0 }));
+    for joint in 0..JOINT_COUNT {
+        probe
+            .robot
+            .effects
+            .extend([0, 1].map(|axis| Effect::AxisTilt {
+                joint,
+                axis,
+                angle: 0.0,
+            }));
+    }
     let mut ids: Vec<ParamId> = (0..JOINT_COUNT).map(ParamId::JointOffset).collect();
-    ids.extend((0..Link::ALL.len()).map(|k| {
-        ParamId::Effect(EffectParam {
-            index: first + k,
-            field: sabr_model::EffectField::Delta,
-        })
+    ids.extend((first..probe.robot.effects.len()).map(|index| {
+        let field = probe.robot.effects[index].fields()[0];
+        ParamId::Effect(EffectParam { index, field })
     }));
     (probe, ParamLayout::new(ids))
 }

@@ -201,11 +201,11 @@ impl EffectParam {
         self.field.unit()
     }
 
-    /// How the parameter acts on a prediction: link lengths through the geometry, the
-    /// joint-side effects through the joint angles.
+    /// How the parameter acts on a prediction: link lengths and axis tilts through the
+    /// geometry, the joint-side effects through the joint angles.
     pub fn channel(&self) -> Channel {
         match self.field {
-            EffectField::Delta => Channel::Geometry,
+            EffectField::Delta | EffectField::Angle => Channel::Geometry,
             _ => Channel::JointMap,
         }
     }

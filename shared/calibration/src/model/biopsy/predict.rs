@@ -33,7 +33,13 @@ pub fn joint_angles(model: &BiopsyModel, obs: &Observation) -> Joints {
     if robot.effects.is_empty() {
         paper
     } else {
-        sabr_model::effects::apply_joint_effects(&robot.effects, &paper, &motor, &obs.motion)
+        sabr_model::effects::apply_joint_effects(
+            &robot.effects,
+            &paper,
+            &motor,
+            &robot.encoder_scale(),
+            &obs.motion,
+        )
     }
 }
 
