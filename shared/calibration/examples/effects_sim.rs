@@ -56,6 +56,13 @@ fn main() -> anyhow::Result<()> {
     print!("{}", sabr_calibration::report::summary_text(report));
     for e in &report.effects {
         println!("  {} evidence {:?}", e.label, e.evidence);
+        if !e.evidence.aliases.is_empty() {
+            println!(
+                "  {} could equally be: {}",
+                e.label,
+                e.evidence.aliases.join(", ")
+            );
+        }
     }
     println!("leads:");
     for c in &report.r#final.leads {

@@ -1,7 +1,7 @@
 //! The residual loop at realistic magnitudes: backlash as a play operator with memory
 //! (0.005–0.01 rad), transmission ripple (0.005–0.015 rad), joint-axis tilts (0.3–1°), two
 //! effects at once. Each is named and ends within 1.5× the held-out tip error of the same
-//! seed without the effect.
+//! seed without the effect; a tilt the paper's parameters absorb is not claimed.
 //!
 //! Release only: `cargo test --release -p sabr-calibration --test effects_realistic`.
 
@@ -69,20 +69,31 @@ fn ripple_and_wide_backlash_together_are_both_named() {
     assert_parameter(&run, index("backlash"), "width", 0.01);
 }
 
-/// A 0.5° tilt of the θ4 axis about the back plane's x axis: an axis tilt of the back stage
-/// is named (the θ4 and θ5 tilts about the same axis move the back effector almost alike,
-/// so the identifiable one may carry it) and the error ends within 1.5× clean.
-#[test]
-#[cfg_attr(debug_assertions, ignore = "release only")]
-fn back_stage_axis_tilt_is_named_and_explained() {
+/// Calibrates seed 15 with the tilt `spec` and checks that one axis tilt is named: the
+/// injected one (joint 1..5, axis 1..2), or a candidate the report names as its alias
+/// (tilts the data can hardly tell apart, e.g. θ4 and θ5 about the back plane's x axis);
+/// and that the held-out tip error ends within 1.5× the clean session's.
+fn assert_tilt_named(spec: &str, joint: usize, axis: usize) {
     let seed = 15;
-    let with = run(&config(seed, 0.25, &["tilt:joint=4,axis=1,angle=0.0087"]));
+    let with = run(&config(seed, 0.25, &[spec]));
     let clean = run(&config(seed, 0.25, &[]));
     let report = &with.calibration.report;
-    assert_eq!(report.effects.len(), 1, "{}", report.r#final.verdict);
+    assert_eq!(
+        report.effects.len(),
+        1,
+        "{spec}: {}",
+        report.r#final.verdict
+    );
     let effect = &report.effects[0];
     assert_eq!(effect.name, "axis_tilt");
-    assert!(matches!(effect.joint, Some(4 | 5)), "{effect:?}");
+    let injected = format!("axis_tilt θ{joint} axis {axis}");
+    assert!(
+        effect.label == injected || effect.evidence.aliases.contains(&injected),
+        "{spec}: named {} (aliases {:?})",
+        effect.label,
+        effect.evidence.aliases
+    );
+    assert!(effect.evidence.identifiable >= 1e-3);
     assert!(
         report.r#final.leads.is_empty(),
         "{:?}",
@@ -92,8 +103,32 @@ fn back_stage_axis_tilt_is_named_and_explained() {
         truth_tip_rms(&with.calibration.params, &with),
         truth_tip_rms(&clean.calibration.params, &clean),
     );
-    eprintln!("tilt θ4 0.5°: tip {a:.4} mm, clean {b:.4} mm");
-    assert!(a <= 1.5 * b, "tip {a:.4} mm vs {b:.4} mm clean");
+    eprintln!("{spec}: tip {a:.4} mm, clean {b:.4} mm");
+    assert!(a <= 1.5 * b, "{spec}: tip {a:.4} mm vs {b:.4} mm clean");
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only")]
+fn back_stage_axis_tilt_is_named_through_its_alias() {
+    assert_tilt_named("tilt:joint=4,axis=1,angle=0.0087", 4, 1);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only")]
+fn roll_axis_tilt_of_one_degree_is_named() {
+    assert_tilt_named("tilt:joint=3,axis=1,angle=0.0175", 3, 1);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only")]
+fn front_axis_tilt_of_one_degree_is_named() {
+    assert_tilt_named("tilt:joint=2,axis=1,angle=0.0175", 2, 1);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only")]
+fn small_wrist_axis_tilt_is_named() {
+    assert_tilt_named("tilt:joint=5,axis=2,angle=0.0052", 5, 2);
 }
 
 /// A 0.6° tilt of θ1 about the y axis of `Bf` is absorbed by the paper's parameters (the

@@ -164,3 +164,56 @@ reference_cases!(
     ripple_backlash7,
     thermal8,
 );
+
+/// Prints the reference entries of the cases named in `REFERENCE_CASES` (comma-separated)
+/// as JSON, computed by today's engine, for a deliberate change of the physics (a new
+/// simulator or model effect) to re-record them:
+/// `REFERENCE_CASES=backlash3 cargo test --release -p sabr-calibration --test reference --
+/// --ignored --nocapture record_reference_cases`.
+#[test]
+#[ignore = "re-records reference cases on request"]
+fn record_reference_cases() {
+    let names = std::env::var("REFERENCE_CASES").unwrap_or_default();
+    for name in names.split(',').filter(|n| !n.is_empty()) {
+        let mut case = reference(name);
+        let calibration = calibrated(&case);
+        let report = &calibration.report;
+        case["latency_ms"] = report.latency_ms.into();
+        case["latency_std_ms"] = report.latency_std_ms.into();
+        let mut parameters = serde_json::Map::new();
+        for row in &report.parameters {
+            parameters.insert(
+                row.name.clone(),
+                serde_json::json!([row.stepwise, row.joint, row.std_dev]),
+            );
+        }
+        case["parameters"] = parameters.into();
+        case["effects_found"] = report
+            .effects
+            .iter()
+            .map(|e| {
+                let parameters: serde_json::Map<String, Value> = e
+                    .parameters
+                    .iter()
+                    .map(|p| (p.name.clone(), serde_json::json!([p.value, p.std_dev])))
+                    .collect();
+                serde_json::json!({
+                    "name": e.name,
+                    "joint": e.joint,
+                    "link": e.link,
+                    "harmonic": e.harmonic,
+                    "parameters": parameters,
+                })
+            })
+            .collect::<Vec<_>>()
+            .into();
+        case["leads"] = report
+            .r#final
+            .leads
+            .iter()
+            .map(|l| Value::from(l.label.clone()))
+            .collect::<Vec<_>>()
+            .into();
+        println!("REFERENCE {}", serde_json::to_string(&case).unwrap());
+    }
+}

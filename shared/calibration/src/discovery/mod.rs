@@ -15,7 +15,8 @@
 //!    Significant means: in-sample gain above both the BIC penalty `k·ln m` and the χ²_k
 //!    quantile of a family-wise level [`SELECTION_LEVEL`] over all candidates, positive
 //!    held-out gain, and a lower held-out error in at least [`MIN_FOLDS_IMPROVED`] of the
-//!    folds. A library winner is added to the model (its linearised coefficients start the
+//!    folds, and identifiable: at least [`MIN_IDENTIFIABLE`] of its columns outside the span
+//!    of the fitted parameters. A library winner is added to the model (its linearised coefficients start the
 //!    fit), everything is refitted jointly ([`joint_fit`] on the extended layout) and kept
 //!    only if the refit gains as much as the test demanded. A probe winner is structure the
 //!    library does not explain: it is reported as a lead, never added, and the following
@@ -47,6 +48,14 @@ pub const MAX_EFFECTS: usize = 4;
 pub const SELECTION_LEVEL: f64 = 1e-3;
 /// Folds (of [`FOLDS`]) in which a selected candidate must lower the held-out error.
 pub const MIN_FOLDS_IMPROVED: usize = 7;
+/// Smallest share of a candidate's columns that must lie outside the span of the fitted
+/// parameters (smallest singular value of its unit columns after projecting them out) for
+/// it to be selectable: below it the data cannot tell the candidate from what is fitted
+/// (the relative singular-value floor of the identifiability pruning).
+pub const MIN_IDENTIFIABLE: f64 = 1e-3;
+/// Correlation beyond the fitted parameters at which two candidates are reported as
+/// aliases of each other.
+pub const ALIAS_CORRELATION: f64 = 0.9;
 /// Correlates listed in the outcome.
 const CORRELATES_REPORTED: usize = 8;
 
@@ -164,6 +173,8 @@ fn effect_report<M: RobotModel, S>(
             folds: FOLDS,
             held_out_whitened_rms: choice.held_out_rms,
             refit_chi2_gain: added.refit_gain,
+            identifiable: choice.identifiable,
+            aliases: choice.aliases.clone(),
         },
         before,
         after,
@@ -215,6 +226,8 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
                 .filter(Evaluation::significant)
                 .max_by(|a, b| a.held_out_gain.total_cmp(&b.held_out_gain))?;
             if best.info.in_library {
+                let mut best = best;
+                best.aliases = round.aliases(&base, best.index);
                 return Some(best);
             }
             tracing::debug!(probe = best.info.label, "structure outside the library");

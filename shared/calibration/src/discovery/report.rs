@@ -38,6 +38,13 @@ pub struct SelectionEvidence {
     pub held_out_whitened_rms: [f64; 2],
     /// Cost reduction of the actual joint refit, measured on the fit before it (χ² units).
     pub refit_chi2_gain: f64,
+    /// How much of the candidate the fitted parameters did not already explain: the
+    /// smallest singular value of its unit columns after projecting them out (1 = new).
+    pub identifiable: f64,
+    /// Other candidates the data can hardly tell from this one (their columns correlate at
+    /// least 0.9 with its own beyond the fitted parameters): the effect may sit on any of
+    /// them.
+    pub aliases: Vec<String>,
 }
 
 /// One effect the loop added, with the metrics `S` of the models before and after.
@@ -81,6 +88,9 @@ pub struct Correlate {
     pub explained_share: f64,
     /// Held-out cost reduction (χ² units).
     pub held_out_gain: f64,
+    /// Smallest singular value of its unit columns beyond the fitted parameters (1 = new
+    /// information, below 1e-3 = not identifiable, never selected).
+    pub identifiable: f64,
     /// Whether it passes the selection test on its own.
     pub significant: bool,
 }

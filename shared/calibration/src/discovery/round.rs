@@ -4,7 +4,7 @@
 use crate::discovery::report::Correlate;
 use crate::discovery::selection::{Design, SetFit};
 use crate::discovery::significance::chi2_quantile;
-use crate::discovery::{MIN_FOLDS_IMPROVED, SELECTION_LEVEL};
+use crate::discovery::{ALIAS_CORRELATION, MIN_FOLDS_IMPROVED, MIN_IDENTIFIABLE, SELECTION_LEVEL};
 use crate::fit::joint_fit::JointFit;
 use crate::model::{CandidateInfo, RobotModel};
 
@@ -23,11 +23,17 @@ pub(super) struct Evaluation<M: RobotModel> {
     pub(super) held_out_rms: [f64; 2],
     pub(super) coefficients: Vec<f64>,
     pub(super) explained_share: f64,
+    /// Smallest singular value of the candidate's unit columns after projecting out the
+    /// columns it is tested on top of: 1 = new information, 0 = already in their span.
+    pub(super) identifiable: f64,
+    /// Labels of the candidates it can hardly be told from (filled for a selected one).
+    pub(super) aliases: Vec<String>,
 }
 
 impl<M: RobotModel> Evaluation<M> {
     pub(super) fn significant(&self) -> bool {
-        self.chi2_gain >= self.threshold
+        self.identifiable >= MIN_IDENTIFIABLE
+            && self.chi2_gain >= self.threshold
             && self.held_out_gain > 0.0
             && self.folds_improved >= MIN_FOLDS_IMPROVED
     }
@@ -40,6 +46,7 @@ impl<M: RobotModel> Evaluation<M> {
             chi2_gain: self.chi2_gain,
             explained_share: self.explained_share,
             held_out_gain: self.held_out_gain,
+            identifiable: self.identifiable,
             significant: self.significant(),
         }
     }
@@ -107,6 +114,8 @@ impl<M: RobotModel> Round<M> {
         }
         let set: Vec<usize> = base.iter().chain(columns).copied().collect();
         let with = self.design.fit(&set)?;
+        let conditional = self.design.conditional_gram(base, columns)?;
+        let identifiable = conditional.symmetric_eigenvalues().min().max(0.0).sqrt();
         let gains: Vec<f64> = without
             .fold_sse
             .iter()
@@ -130,6 +139,31 @@ impl<M: RobotModel> Round<M> {
             ],
             coefficients: with.step[base.len()..].to_vec(),
             explained_share: (without.sse - with.sse) / without.sse.max(f64::MIN_POSITIVE),
+            identifiable,
+            aliases: Vec::new(),
         })
+    }
+
+    /// The labels of the pool's one-parameter candidates whose columns, beyond `base`, are
+    /// so alike those of the one-parameter candidate `chosen` (correlation at least
+    /// [`ALIAS_CORRELATION`]) that the data can hardly tell which of them acts.
+    pub(super) fn aliases(&self, base: &[usize], chosen: usize) -> Vec<String> {
+        let own = &self.ranges[chosen];
+        if own.len() != 1 {
+            return Vec::new();
+        }
+        (0..self.pool.len())
+            .filter(|&k| k != chosen && self.ranges[k].len() == 1)
+            .filter(|&k| !self.design.is_empty_column(self.ranges[k][0]))
+            .filter(|&k| {
+                self.design
+                    .conditional_gram(base, &[own[0], self.ranges[k][0]])
+                    .is_some_and(|g| {
+                        let scale = (g[(0, 0)] * g[(1, 1)]).sqrt();
+                        scale > 0.0 && (g[(0, 1)] / scale).abs() >= ALIAS_CORRELATION
+                    })
+            })
+            .map(|k| self.infos[k].label.clone())
+            .collect()
     }
 }

@@ -114,6 +114,24 @@ impl Design {
         self.total.gram[(index, index)] == 0.0
     }
 
+    /// The Gram matrix of the (unit-normalised) columns `set` after projecting out the
+    /// columns `base`: what `set` adds beyond `base`. Its diagonal is 1 for a column
+    /// orthogonal to `base` and 0 for one inside its span; `None` when `base` is singular.
+    pub fn conditional_gram(&self, base: &[usize], set: &[usize]) -> Option<DMatrix<f64>> {
+        let gram = &self.total.gram;
+        let own = gram.select_rows(set).select_columns(set);
+        if base.is_empty() {
+            return Some(own);
+        }
+        let mut g = gram.select_rows(base).select_columns(base);
+        for k in 0..base.len() {
+            g[(k, k)] += RIDGE;
+        }
+        let cross = gram.select_rows(base).select_columns(set);
+        let solved = g.cholesky()?.solve(&cross);
+        Some(own - cross.transpose() * solved)
+    }
+
     /// In-sample and held-out fit of the column set `set`; `None` when it is singular.
     pub fn fit(&self, set: &[usize]) -> Option<SetFit> {
         let (sse, delta) = self.total.sse_with(&self.total, set)?;
@@ -221,6 +239,20 @@ mod tests {
             );
         }
         assert!(with.held_out() < base.held_out());
+        // The sine is nearly orthogonal to constant and slope; a copy of the slope is not.
+        let sine = design
+            .conditional_gram(&[0, 1], &[design.extra(0)])
+            .unwrap();
+        assert!(sine[(0, 0)] > 0.9, "{sine}");
+        let slope_again = Design::from_parts(
+            &jacobian.columns(0, 1).into_owned(),
+            &jacobian.columns(1, 1).into_owned(),
+            &residual,
+            &folds,
+        );
+        let inside = slope_again.conditional_gram(&[0], &[1]).unwrap();
+        assert!(inside[(0, 0)] < 0.3, "{inside}");
+        assert!(inside[(0, 0)] > 0.0);
         // A column of noise gains little in sample and loses held out.
         let noisy = design.fit(&[0, 1, design.extra(1)]).unwrap();
         assert!(base.sse - noisy.sse < 0.01 * base.sse);
