@@ -261,3 +261,81 @@ fn malformed_inputs_name_the_file_line_and_reason() {
         "{stderr}"
     );
 }
+
+/// `sabr fk --counts` on a sequence of static poses carries the backlash's play through
+/// the rows: after θ1 reverses, the tip stays put until the motor has crossed the gap, then
+/// follows again.
+#[test]
+fn fk_from_counts_carries_the_backlash_play_through_the_sequence() {
+    let ws = Workspace::new();
+    let mut params = RobotParams::nominal();
+    params.joints.offset = Some([-2.21, -0.89, -0.19, -2.56, -0.74]);
+    params.effects = vec!["backlash:joint=1,width=0.01".parse().unwrap()];
+    let file = ws.write("backlash.toml", &params.to_toml_string());
+    // θ1 up by 600 counts, then back down 60 counts in steps of 2 (the gap: 0.01 rad is
+    // 0.01 / (0.1·2π/2000) ≈ 31.8 counts).
+    let mut counts: Vec<i64> = (0..=600).step_by(20).collect();
+    counts.extend((1..=30).map(|k| 600 - 2 * k));
+    let mut csv = "c1,c2,c3,c4,c5\n".to_owned();
+    for c in &counts {
+        csv += &format!("{c},100,50,-80,40\n");
+    }
+    let input = ws.write("sequence.csv", &csv);
+    let (ok, stdout, stderr) = run(&["fk", "--params", arg(&file), "--counts", arg(&input)]);
+    assert!(ok, "{stderr}");
+    let rows = numbers(&stdout, "x,y,z,ux,uy,uz");
+    assert_eq!(rows.len(), counts.len());
+    let top = counts.iter().position(|&c| c == 600).unwrap();
+    let moved = |k: usize| {
+        let (a, b) = (&rows[top], &rows[k]);
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    };
+    for (k, &c) in counts.iter().enumerate().skip(top + 1) {
+        let travel = 600 - c;
+        if travel <= 28 {
+            assert!(
+                moved(k) < 1e-9,
+                "{travel} counts back: moved {} mm",
+                moved(k)
+            );
+        } else if travel >= 36 {
+            assert!(moved(k) > 1e-3, "{travel} counts back: still held");
+        }
+    }
+}
+
+/// Axis tilts in a parameter file act in `sabr fk` and `sabr ik`: IK of an FK pose returns
+/// the joints, and the tilt moves the tip.
+#[test]
+fn fk_and_ik_honour_axis_tilts_of_the_parameter_file() {
+    let ws = Workspace::new();
+    let mut params = RobotParams::nominal();
+    params.effects = vec![
+        "tilt:joint=3,axis=1,angle=0.0175".parse().unwrap(),
+        "tilt:joint=5,axis=2,angle=-0.006".parse().unwrap(),
+    ];
+    let file = ws.write("tilted.toml", &params.to_toml_string());
+    let q = VECTORS[1];
+    let joints = ws.write(
+        "joints.csv",
+        &format!(
+            "q1,q2,q3,q4,q5\n{},{},{},{},{}\n",
+            q[0], q[1], q[2], q[3], q[4]
+        ),
+    );
+    let (ok, fk_out, stderr) = run(&["fk", "--params", arg(&file), "--joints", arg(&joints)]);
+    assert!(ok, "{stderr}");
+    let pose = &numbers(&fk_out, "x,y,z,ux,uy,uz")[0];
+    let shift = (0..3)
+        .map(|i| (pose[i] - q[5 + i]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(shift > 0.05, "the tilts move the tip by {shift} mm");
+    let targets = ws.write("targets.csv", &fk_out);
+    let (ok, ik_out, stderr) = run(&["ik", "--params", arg(&file), "--targets", arg(&targets)]);
+    assert!(ok, "{stderr}");
+    let solved = &numbers(&ik_out, "q1,q2,q3,q4,q5")[0];
+    for i in 0..5 {
+        assert!((solved[i] - q[i]).abs() < 1e-6, "{solved:?} vs {q:?}");
+    }
+}

@@ -75,6 +75,7 @@ fn ripple_and_backlash_together_are_both_found_and_reported() {
 
     let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
     assert!(html.contains("Residual loop") && html.ends_with("</body></html>"));
+    assert!(html.contains("travel since the last reversal"));
     // Before and after: 5 joints × 2 scatter plots, a histogram and two step charts.
     assert!(
         html.matches("<svg").count() >= 13,

@@ -80,6 +80,70 @@ fn joint_plots(out: &mut String, pictures: &[&ResidualPicture]) {
     }
 }
 
+/// Per joint: the joint error per direction of motion, and direction × joint error along
+/// the travel since the last reversal, before and after the loop (a play the model lacks
+/// splits the directions and ramps over the first gap-width of travel).
+fn hysteresis_plots(out: &mut String, pictures: &[&ResidualPicture]) {
+    out.push_str(
+        "<h3>Hysteresis: residual against the direction of motion and the travel since the \
+         last reversal</h3><table><tr><th>joint</th><th>model</th><th>moving down mrad</th>\
+         <th>moving up mrad</th><th>up − down mrad</th></tr>\n",
+    );
+    let mrad = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.3}"));
+    for j in 0..5 {
+        for picture in pictures {
+            let h = &picture.hysteresis[j];
+            let _ = writeln!(
+                out,
+                "<tr><td>θ{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                j + 1,
+                escape(&picture.label),
+                mrad(h.mean_by_direction_mrad[0]),
+                mrad(h.mean_by_direction_mrad[1]),
+                mrad(h.direction_split_mrad()),
+            );
+        }
+    }
+    out.push_str("</table>\n<div>");
+    for j in 0..5 {
+        let series: Vec<Vec<(f64, f64)>> = pictures
+            .iter()
+            .map(|p| {
+                p.hysteresis[j]
+                    .by_travel_mrad
+                    .iter()
+                    .map(|&(travel, error, _)| (travel, error))
+                    .collect()
+            })
+            .collect();
+        let points: Vec<(f64, f64, usize)> = series
+            .iter()
+            .enumerate()
+            .flat_map(|(k, line)| line.iter().map(move |&(x, y)| (x, y, k)))
+            .collect();
+        let lines: Vec<(usize, &[(f64, f64)])> = series
+            .iter()
+            .enumerate()
+            .map(|(k, line)| (k, line.as_slice()))
+            .collect();
+        let title = format!("θ{}: before (grey), after (blue)", j + 1);
+        out.push_str(
+            &svg::Scatter {
+                title: &title,
+                x_label: "travel since the last reversal (mrad)",
+                y_label: "direction × joint error (mrad)",
+                points: &points,
+                lines: &lines,
+                palette: &["#777777", "#1f5fb4"],
+                x_range: svg::padded_range(points.iter().map(|p| p.0)),
+                y_range: svg::padded_range(points.iter().map(|p| p.1)),
+            }
+            .render(),
+        );
+    }
+    out.push_str("</div>\n");
+}
+
 /// The section, or an empty string when the loop did not run.
 pub fn section(report: &Report) -> String {
     let f = &report.r#final;
@@ -166,6 +230,7 @@ pub fn section(report: &Report) -> String {
              moved (grey).</p>\n",
         );
         joint_plots(&mut out, &pictures);
+        hysteresis_plots(&mut out, &pictures);
         let colours = ["#777", "#1f5fb4"];
         let series: Vec<svg::DensitySeries<'_>> = pictures
             .iter()
