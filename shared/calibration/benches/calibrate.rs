@@ -15,6 +15,10 @@ use sabr_recording::Recording;
 use sabr_sim::{record_session, write_session, SimConfig};
 
 const CHILD_FLAG: &str = "--child-calibrate";
+/// Goal for the median wall time of `sabr calibrate` on a default session (s).
+const WALL_GOAL_S: f64 = 2.0;
+/// Goal for the peak resident memory (MB).
+const MEMORY_GOAL_MB: f64 = 500.0;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args()
@@ -64,16 +68,26 @@ fn main() -> anyhow::Result<()> {
         })
         .collect::<anyhow::Result<_>>()?;
     let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    let (median, peak_mb) = (
+        walls[walls.len() / 2],
+        peaks.iter().copied().fold(0.0, f64::max) / 1024.0,
+    );
+    let verdict = if median <= WALL_GOAL_S && peak_mb <= MEMORY_GOAL_MB {
+        "goals met"
+    } else {
+        "GOALS MISSED"
+    };
     println!(
         "calibrate (seed {seed}, default session, {} tracker rows, {} encoder samples): wall \
          min {:.2} s, median {:.2} s, max {:.2} s over {runs} runs; peak RSS (VmHWM) max {:.0} MB \
-         (goals: ≤ 5 s, ≤ 500 MB); truth tip error RMS {rms:.4} mm",
+         (goals: median ≤ {WALL_GOAL_S} s, ≤ {MEMORY_GOAL_MB} MB: {verdict}); truth tip error \
+         RMS {rms:.4} mm",
         recording.tracker.len(),
         recording.encoders.len(),
         walls[0],
-        walls[walls.len() / 2],
+        median,
         walls[walls.len() - 1],
-        peaks.iter().copied().fold(0.0, f64::max) / 1024.0
+        peak_mb
     );
     Ok(())
 }
