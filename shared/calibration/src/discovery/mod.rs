@@ -86,8 +86,13 @@ pub struct Discovery<M: RobotModel, S> {
     /// Whether structure is left that the library does not explain (a significant probe,
     /// or residual above the noise).
     pub structured_residual: bool,
-    /// Significant signals outside the library found on the way (not claimed as effects).
+    /// Significant signals outside the library found on the way (not claimed as effects)
+    /// that the final model still leaves significant.
     pub leads: Vec<Correlate>,
+    /// Signals outside the library that were significant on the way but that the effects
+    /// added after them explain (no longer significant at the final fit): e.g. a wide
+    /// backlash looks like a joint delay until its play is modelled.
+    pub explained_leads: Vec<Correlate>,
     /// The strongest correlates of the final residual.
     pub strongest_correlates: Vec<Correlate>,
     /// Labels of the effects added.
@@ -269,6 +274,12 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
             .iter()
             .map(Evaluation::correlate)
             .collect();
+        let (leads, explained_leads): (Vec<Correlate>, Vec<Correlate>) =
+            self.leads.into_iter().partition(|lead| {
+                correlates
+                    .iter()
+                    .any(|c| c.label == lead.label && c.significant)
+            });
         correlates.sort_by(|a, b| b.chi2_gain.total_cmp(&a.chi2_gain));
         correlates.truncate(CORRELATES_REPORTED);
         let residual_is_noise = self.judge.residual_is_noise(&self.current);
@@ -277,7 +288,7 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
             verdict: verdict(
                 base_label,
                 &effects_added,
-                &self.leads,
+                &leads,
                 &correlates,
                 residual_is_noise,
             ),
@@ -287,8 +298,9 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
             steps: self.steps,
             metrics: self.current,
             residual_is_noise,
-            structured_residual: !self.leads.is_empty() || !residual_is_noise,
-            leads: self.leads,
+            structured_residual: !leads.is_empty() || !residual_is_noise,
+            leads,
+            explained_leads,
             strongest_correlates: correlates,
         }
     }

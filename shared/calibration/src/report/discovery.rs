@@ -128,8 +128,12 @@ pub struct FinalReport {
     /// Whether structure is left that the library does not explain (a significant probe
     /// outside the library, or residual above the tracker noise).
     pub structured_residual: bool,
-    /// Significant signals outside the library found on the way (not claimed as effects).
+    /// Significant signals outside the library found on the way (not claimed as effects)
+    /// and still significant at the final fit.
     pub leads: Vec<Correlate>,
+    /// Signals outside the library significant on the way but explained by the effects
+    /// added after them.
+    pub explained_leads: Vec<Correlate>,
     /// The strongest correlates of the final residual.
     pub strongest_correlates: Vec<Correlate>,
     /// One-sentence conclusion.
@@ -152,6 +156,7 @@ impl FinalReport {
             residual_is_noise: discovery.residual_is_noise,
             structured_residual: discovery.structured_residual,
             leads: discovery.leads.clone(),
+            explained_leads: discovery.explained_leads.clone(),
             strongest_correlates: discovery.strongest_correlates.clone(),
             verdict: discovery.verdict.clone(),
             hysteresis: plots

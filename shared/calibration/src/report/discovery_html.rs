@@ -280,6 +280,13 @@ pub fn section(report: &Report) -> String {
         out.push_str("<h3>Structure outside the effect library (not claimed)</h3>\n");
         correlate_rows(&mut out, &f.leads);
     }
+    if !f.explained_leads.is_empty() {
+        out.push_str(
+            "<h3>Structure outside the library on the way, explained by the effects added \
+             after it</h3>\n",
+        );
+        correlate_rows(&mut out, &f.explained_leads);
+    }
     out.push_str("<h3>Strongest correlates of the final residual</h3>\n");
     correlate_rows(&mut out, &f.strongest_correlates);
     out

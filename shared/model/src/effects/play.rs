@@ -8,14 +8,18 @@
 //! `y ← clamp(y, x − h, x + h)` applied along the input's path. Between two turning points
 //! the input is monotonic, and clamping along a monotonic path equals clamping once at its
 //! end, so the output at any instant follows exactly from the turning points of the input
-//! ([`PlayMemory`]) and its present value ([`play_output`]).
+//! ([`PlayMemory`]) and its present value ([`play_output`]). Like every hysteresis of this
+//! kind the play forgets a pair of turning points once the input goes beyond the older of
+//! them (the wiping-out property), so the memory holds only the nested, shrinking
+//! oscillations since the last large stroke.
 
-/// Turning points of one joint that [`PlayMemory`] keeps. Older ones matter only when every
-/// stroke between them and now was shorter than the gap.
-pub const PLAY_MEMORY: usize = 6;
+/// Turning points of one joint that [`PlayMemory`] keeps after wiping out. Older ones
+/// matter only when more than this many nested oscillations were each shorter than the gap.
+pub const PLAY_MEMORY: usize = 12;
 
-/// The recent turning points of one joint's input, in encoder counts (fractional), newest
-/// first: where its direction of motion last changed.
+/// The turning points of one joint's input that still matter, in encoder counts
+/// (fractional), newest first: alternating maxima and minima, each pair closer together
+/// than the pair before it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PlayMemory {
     turns: [f64; PLAY_MEMORY],
@@ -25,8 +29,26 @@ pub struct PlayMemory {
 
 impl PlayMemory {
     /// Records a turning point at `counts`. `from_rest` marks the point where the joint
-    /// first moved (the gap's state before it is unknown and taken as centred).
+    /// first moved (the gap's state before it is unknown and taken as centred). Once the
+    /// memory is full that start is forgotten (the gap taken as closed against the motion
+    /// at the oldest point kept); from then on a turning point beyond the previous one of
+    /// its kind wipes out that one and the turning point after it. While the start is
+    /// remembered nothing is wiped out: a centred gap is no turning point, and a later one
+    /// cannot stand for it.
     pub fn push(&mut self, counts: f64, from_rest: bool) {
+        while !self.from_rest && self.len >= 2 {
+            let (last, previous) = (self.turns[0], self.turns[1]);
+            let beyond = if counts > last {
+                counts >= previous
+            } else {
+                counts <= previous
+            };
+            if !beyond {
+                break;
+            }
+            self.turns.copy_within(2..self.len, 0);
+            self.len -= 2;
+        }
         self.turns.copy_within(0..PLAY_MEMORY - 1, 1);
         self.turns[0] = counts;
         if self.len == PLAY_MEMORY {
@@ -89,23 +111,37 @@ pub fn play_output(
 mod tests {
     use super::*;
 
-    /// The play operator run sample by sample.
-    fn reference(half_width: f64, path: &[f64], start: f64) -> f64 {
-        path.iter()
-            .fold(start, |y, &x| y.clamp(x - half_width, x + half_width))
-    }
-
     #[test]
-    fn memory_keeps_the_newest_turns_first() {
+    fn memory_keeps_shrinking_oscillations_and_wipes_out_the_rest() {
         let mut memory = PlayMemory::default();
-        memory.push(1.0, true);
+        memory.push(0.0, true);
         assert!(memory.starts_from_rest());
-        for k in 2..=(PLAY_MEMORY + 2) {
-            memory.push(k as f64, false);
+        // Shrinking oscillations are all kept, newest first.
+        for turn in [10.0, 1.0, 9.0, 2.0, 8.0] {
+            memory.push(turn, false);
+        }
+        assert_eq!(memory.turns(), &[8.0, 2.0, 9.0, 1.0, 10.0, 0.0]);
+        // While the start is remembered nothing is wiped out: shrinking and growing
+        // oscillations alike are kept, until a full memory forgets the start.
+        for k in 0..(PLAY_MEMORY - 6) {
+            memory.push(if k % 2 == 0 { 0.5 } else { 11.0 }, false);
         }
         assert_eq!(memory.turns().len(), PLAY_MEMORY);
-        assert_eq!(memory.turns()[0], (PLAY_MEMORY + 2) as f64);
-        assert!(!memory.starts_from_rest(), "the start has been forgotten");
+        assert!(memory.starts_from_rest());
+        memory.push(0.4, false);
+        assert!(!memory.starts_from_rest());
+        // Then a maximum beyond the earlier ones wipes out every pair below it.
+        memory.push(12.0, false);
+        assert_eq!(memory.turns(), &[12.0]);
+        // Shrinking oscillations are kept, newest first; a minimum beyond the first wipes
+        // them out.
+        for turn in [1.0, 10.0, 2.0, 9.0, 3.0] {
+            memory.push(turn, false);
+        }
+        assert_eq!(memory.turns(), &[3.0, 9.0, 2.0, 10.0, 1.0, 12.0]);
+        memory.push(8.0, false);
+        memory.push(0.5, false);
+        assert_eq!(memory.turns(), &[0.5, 12.0]);
     }
 
     #[test]
@@ -135,27 +171,42 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (state >> 11) as f64 / (1u64 << 53) as f64
         };
-        for _ in 0..200 {
-            // A path of strokes, some shorter than the gap.
-            let mut path = vec![0.0];
-            let mut turns = vec![0.0];
+        for case in 0..400 {
+            // From rest (fewer strokes than the memory holds), or after a long first stroke
+            // that closes the gap (then many strokes, most shorter than the gap, so that the
+            // memory wipes out).
+            let from_rest = case % 2 == 0;
             let mut direction = if random() < 0.5 { 1.0 } else { -1.0 };
-            for _ in 0..(1 + (random() * 8.0) as usize) {
-                let stroke = random() * 0.02;
+            let mut path = vec![0.0];
+            let mut memory = PlayMemory::default();
+            let mut reference = 0.0;
+            let strokes = if from_rest {
+                1 + (random() * (PLAY_MEMORY - 1) as f64) as usize
+            } else {
+                memory.push(-direction * 0.05, false);
+                reference = -direction * h;
+                1 + (random() * 60.0) as usize
+            };
+            for stroke_index in 0..strokes {
+                let stroke = random() * if random() < 0.7 { 0.006 } else { 0.03 };
                 let last = *path.last().unwrap();
-                for k in 1..=20 {
-                    path.push(last + direction * stroke * k as f64 / 20.0);
+                if stroke_index > 0 || from_rest {
+                    memory.push(last, from_rest && stroke_index == 0);
                 }
-                turns.push(*path.last().unwrap());
+                for k in 1..=20 {
+                    let x = last + direction * stroke * k as f64 / 20.0;
+                    path.push(x);
+                    reference = f64::clamp(reference, x - h, x + h);
+                }
                 direction = -direction;
             }
-            turns.pop();
             direction = -direction;
             let x = *path.last().unwrap();
-            let newest_first: Vec<f64> = turns.iter().rev().copied().collect();
-            let y = play_output(h, x, direction, &newest_first, true);
-            let expected = reference(h, &path, 0.0);
-            assert!((y - expected).abs() < 1e-12, "{y} vs {expected}");
+            let y = play_output(h, x, direction, memory.turns(), memory.starts_from_rest());
+            assert!(
+                (y - reference).abs() < 1e-12,
+                "case {case}: {y} vs {reference}"
+            );
         }
     }
 }
