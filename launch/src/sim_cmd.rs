@@ -34,8 +34,10 @@ struct RecordArgs {
     /// Effect injected into the true robot or tracker (repeatable), joints 1..5:
     /// `ripple:joint=J,harmonic=H,amplitude=RAD[,phase=RAD]`, `backlash:joint=J,width=RAD`,
     /// `link:link=l_f|l_fe|l_b|l_be|d_offset,delta=MM`, `compliance:joint=J,gain=RAD`,
-    /// `latency:ms=MS` (extra tracker latency), `thermal:joint=J,amplitude=RAD[,tau_s=S]`
-    /// (joint drift, outside the model's effect library).
+    /// `tilt:joint=J,axis=1|2,angle=RAD` (joint-axis tilt); outside the model's effect
+    /// library: `latency:ms=MS` (extra tracker latency), `thermal:joint=J,amplitude=RAD[,tau_s=S]`
+    /// (joint drift), `thermal:link=NAME,delta=MM[,tau_s=S]` (link-length drift),
+    /// `sag:mm=MM` (needle sag under gravity), `clockdrift:ppm=PPM` (tracker clock rate).
     #[arg(long = "effect", value_name = "SPEC", value_parser = parse_effect)]
     effects: Vec<SimEffect>,
     /// Multiplies the phase durations (1 ≈ 5 minutes of robot time).

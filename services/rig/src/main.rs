@@ -55,7 +55,9 @@ struct Args {
     /// Effect injected into the true robot or tracker (repeatable), same syntax as
     /// `sabr sim record --effect`: `ripple:joint=J,harmonic=H,amplitude=RAD[,phase=RAD]`,
     /// `backlash:joint=J,width=RAD`, `link:link=NAME,delta=MM`, `compliance:joint=J,gain=RAD`,
-    /// `latency:ms=MS`, `thermal:joint=J,amplitude=RAD[,tau_s=S]`.
+    /// `tilt:joint=J,axis=1|2,angle=RAD`, `latency:ms=MS`,
+    /// `thermal:joint=J,amplitude=RAD[,tau_s=S]`, `thermal:link=NAME,delta=MM[,tau_s=S]`,
+    /// `sag:mm=MM`, `clockdrift:ppm=PPM`.
     #[arg(long = "effect", value_name = "SPEC", value_parser = parse_effect)]
     effects: Vec<SimEffect>,
     /// Multiplies the phase durations of the session plan (1 ≈ 5 minutes).

@@ -26,7 +26,10 @@ pub use encoder::{EncoderClock, EncoderConfig};
 pub use sabr_model::EffectSpecError;
 pub use session::{record_session, FrameTruth, Session, SimConfig, Truth, ValidationTruth};
 pub use tracker::{Exposure, TrackerConfig, TrackerEmulator, TrackerFrame, TrackerTruth};
-pub use truth::{quantise_counts, Perturbation, RobotTruth, ThermalDrift, ToolPoses, TrueRobot};
+pub use truth::{
+    quantise_counts, sag_deflection, LinkDrift, Perturbation, RobotTruth, ThermalDrift, ToolPoses,
+    TrueRobot,
+};
 pub use truth_files::{truth_dir, write_session, TRUTH_DIR};
 
 /// Why a session could not be simulated or written.

@@ -66,15 +66,22 @@ impl SimConfig {
                 self.duration_scale
             )));
         }
-        let latencies = self
-            .effects
-            .iter()
-            .filter(|e| matches!(e, SimEffect::TrackerLatency { .. }))
-            .count();
-        if latencies > 1 {
-            return Err(SimError::Config(
-                "the latency effect is given more than once".into(),
-            ));
+        for (index, effect) in self.effects.iter().enumerate() {
+            let name = match effect {
+                SimEffect::TrackerLatency { .. } => "latency",
+                SimEffect::NeedleSag { .. } => "sag",
+                SimEffect::TrackerClockDrift { .. } => "clockdrift",
+                _ => continue,
+            };
+            let kind = std::mem::discriminant(effect);
+            if self.effects[..index]
+                .iter()
+                .any(|e| std::mem::discriminant(e) == kind)
+            {
+                return Err(SimError::Config(format!(
+                    "the {name} effect is given more than once"
+                )));
+            }
         }
         let rate = self.tracker.rate_hz;
         if !(rate.is_finite() && rate > 0.0) || self.tracker.frame_increment == 0 {
@@ -198,10 +205,15 @@ impl Session {
                 _ => None,
             })
             .unwrap_or(0.0);
+        let clock_drift_ppm = config.effects.iter().find_map(|e| match e {
+            SimEffect::TrackerClockDrift { ppm } => Some(*ppm),
+            _ => None,
+        });
         let tracker = TrackerTruth::sample(
             &config.tracker,
             &centre_in_base,
             extra_latency_ms,
+            clock_drift_ppm,
             &mut stream(config.seed, Stream::TrackerSession),
         );
         let host_start_ns = stream(config.seed, Stream::HostClock)

@@ -44,7 +44,8 @@ pub struct TrackerConfig {
     pub occlusions_per_min: f64,
     /// Duration of an occlusion, uniform in this range (s).
     pub occlusion_s: (f64, f64),
-    /// Maximum tracker clock rate error (ppm), sampled once per session.
+    /// Maximum tracker clock rate error (ppm), sampled once per session (the `clockdrift`
+    /// effect sets it exactly instead).
     pub clock_drift_ppm: f64,
     /// Range of the camera distance from the robot (mm).
     pub distance_mm: (f64, f64),
@@ -98,10 +99,13 @@ pub struct TrackerTruth {
 impl TrackerTruth {
     /// Samples a session: tracker `distance_mm` from `workspace_centre` (a point in `M`, mm), looking at
     /// it from 20–50° elevation, latency, clock error, frame counter start, fit errors.
+    /// `exact_clock_drift_ppm` (the `clockdrift` effect) replaces the sampled clock rate error
+    /// (ppm); the random draws stay the same, so nothing else changes.
     pub fn sample(
         config: &TrackerConfig,
         workspace_centre: &Point3<f64>,
         extra_latency_ms: f64,
+        exact_clock_drift_ppm: Option<f64>,
         rng: &mut impl Rng,
     ) -> Self {
         let elevation = rng.random_range(20f64.to_radians()..=50f64.to_radians());
@@ -128,7 +132,8 @@ impl TrackerTruth {
         let camera = workspace_centre.coords + distance * z + rotation * lateral;
         let base_from_tracker = Isometry3::from_parts(Translation3::from(camera), rotation);
 
-        let drift = rng.random_range(-1.0..=1.0) * config.clock_drift_ppm * 1e-6;
+        let sampled_ppm = rng.random_range(-1.0..=1.0) * config.clock_drift_ppm;
+        let drift = exact_clock_drift_ppm.unwrap_or(sampled_ppm) * 1e-6;
         let period_ns = 1e9 / config.rate_hz * (1.0 + drift);
         let first_exposure_ns = (rng.random_range(0.0..1.0) * period_ns) as i64;
         let (low, high) = config.fit_rms_mm;

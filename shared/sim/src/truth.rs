@@ -2,6 +2,7 @@
 //! power-up pose, and [`TrueRobot`], which turns motor setpoints into true joint angles and
 //! poses. It knows nothing about how it is driven (offline plan or real-time rig).
 
+use std::borrow::Cow;
 use std::f64::consts::PI;
 
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -103,6 +104,71 @@ impl ThermalDrift {
     }
 }
 
+/// A thermal drift of one link length (simulator-only effect).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkDrift {
+    /// The link whose length drifts.
+    pub link: sabr_model::Link,
+    /// Final length change (mm).
+    pub delta: f64,
+    /// Time constant (s).
+    pub tau_s: f64,
+}
+
+impl LinkDrift {
+    /// The link drifts among the injected `effects`, in their order.
+    pub fn all_in(effects: &[SimEffect]) -> Vec<LinkDrift> {
+        effects
+            .iter()
+            .filter_map(|e| match *e {
+                SimEffect::LinkThermal { link, delta, tau_s } => {
+                    Some(LinkDrift { link, delta, tau_s })
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Length change (mm) at `t_ns` after power-up: `delta · (1 − exp(−t / tau_s))`.
+    pub fn drift_at(&self, t_ns: i64) -> f64 {
+        self.delta * (1.0 - (-(t_ns as f64) * 1e-9 / self.tau_s).exp())
+    }
+
+    /// Adds the drift at `t_ns` to the drifting link of `geometry` (mm).
+    pub fn apply(&self, geometry: &mut Geometry, t_ns: i64) {
+        use sabr_model::Link;
+        let length = match self.link {
+            Link::LF => &mut geometry.l_f,
+            Link::LFe => &mut geometry.l_fe,
+            Link::LB => &mut geometry.l_b,
+            Link::LBe => &mut geometry.l_be,
+            Link::DOffset => &mut geometry.d_offset,
+        };
+        *length += self.drift_at(t_ns);
+    }
+}
+
+/// Gravity direction in `Bb` (unit): −y.
+const GRAVITY_IN_BB: Vector3<f64> = Vector3::new(0.0, -1.0, 0.0);
+
+/// Deflection (mm, in `Bb`) of the needle tip by a sag of `mm` under gravity: the component of
+/// gravity (−y of `Bb`) perpendicular to the needle direction `z_N` (unit), times `mm`, i.e.
+/// `mm · (g − z_N (g·z_N))`; `mm` long when the needle is horizontal, zero when vertical.
+pub fn sag_deflection(mm: f64, direction: &Vector3<f64>) -> Vector3<f64> {
+    mm * (GRAVITY_IN_BB - direction * GRAVITY_IN_BB.dot(direction))
+}
+
+/// The needle sag (mm of a horizontal needle) of the injected `effects`, 0 without one.
+pub(crate) fn needle_sag_mm(effects: &[SimEffect]) -> f64 {
+    effects
+        .iter()
+        .filter_map(|e| match *e {
+            SimEffect::NeedleSag { mm } => Some(mm),
+            _ => None,
+        })
+        .sum()
+}
+
 /// Everything about the true robot: true parameters (with the true offsets and the injected
 /// model effects), stops, power-up pose, simulator-only effects.
 #[derive(Debug, Clone, PartialEq)]
@@ -118,6 +184,10 @@ pub struct RobotTruth {
     pub power_up_joints: Joints,
     /// Simulator-only joint drifts.
     pub thermal: Vec<ThermalDrift>,
+    /// Simulator-only link-length drifts, added to the effective geometry.
+    pub link_drift: Vec<LinkDrift>,
+    /// Simulator-only needle sag under gravity (mm of a horizontal needle; 0 = none).
+    pub needle_sag_mm: f64,
 }
 
 /// Uniform sample in `[-half, half]`.
@@ -217,10 +287,10 @@ const IK_TOLERANCE: f64 = 1e-6;
 
 impl RobotTruth {
     /// Checks that the true robot following `plan` stays in its reachable workspace: at
-    /// every 50 ms, FK of the true joints exists and IK recovers them.
+    /// every 50 ms, FK of the true joints (geometry at that time, needle rigid) exists and
+    /// IK recovers them.
     pub fn check_reachable(&self, plan: &SessionPlan) -> Result<(), SimError> {
         let mut robot = TrueRobot::new(self.clone());
-        let geometry = self.params.effective_geometry();
         let mut t_ns = 0;
         while t_ns <= plan.end_ns() {
             robot.command(t_ns, &self.motor_for_joints(&plan.joints_at(t_ns)));
@@ -230,8 +300,8 @@ impl RobotTruth {
                 joints: q,
                 reason,
             };
-            let pose = robot.pose().map_err(|e| unreachable(e.to_string()))?;
-            let back = inverse(&geometry, &pose.tip, &pose.direction, &q)
+            let pose = robot.rigid_pose().map_err(|e| unreachable(e.to_string()))?;
+            let back = inverse(&robot.geometry(), &pose.tip, &pose.direction, &q)
                 .map_err(|e| unreachable(format!("IK of the FK pose fails: {e}")))?;
             let error = q
                 .iter()
@@ -291,6 +361,8 @@ impl RobotTruth {
             stop_side: std::array::from_fn(|i| (nominal_stops[i] - centre[i]).signum()),
             power_up_joints,
             thermal,
+            link_drift: LinkDrift::all_in(effects),
+            needle_sag_mm: needle_sag_mm(effects),
         })
     }
 
@@ -446,12 +518,39 @@ impl TrueRobot {
     }
 
     /// True needle and effector poses in `Bb` (FK of the true joints, true geometry with
-    /// link-length effects).
+    /// link-length effects and link drifts at the current time), the needle tip deflected by
+    /// its sag: the tip and the origin of `T_Bb_N` move, the direction and effectors do not.
     pub fn pose(&self) -> Result<NeedlePose, KinematicsError> {
-        forward(&self.geometry, &self.joints())
+        let mut pose = self.rigid_pose()?;
+        if self.truth.needle_sag_mm > 0.0 {
+            let deflection = sag_deflection(self.truth.needle_sag_mm, &pose.direction);
+            pose.tip += deflection;
+            pose.needle.translation.vector += deflection;
+        }
+        Ok(pose)
     }
 
-    /// True tool poses in `Bb`: effector poses times the true marker mountings, and the tip.
+    /// Needle and effector poses in `Bb` of a rigid needle (no sag): FK of the true joints
+    /// with the true geometry at the current time.
+    pub fn rigid_pose(&self) -> Result<NeedlePose, KinematicsError> {
+        forward(&self.geometry(), &self.joints())
+    }
+
+    /// True geometry at the current time (mm): the truth's effective geometry (link-length
+    /// effects) plus the link drifts at the time of the last command.
+    pub fn geometry(&self) -> Cow<'_, Geometry> {
+        if self.truth.link_drift.is_empty() {
+            return Cow::Borrowed(&self.geometry);
+        }
+        let mut geometry = self.geometry.clone();
+        for drift in &self.truth.link_drift {
+            drift.apply(&mut geometry, self.t_ns);
+        }
+        Cow::Owned(geometry)
+    }
+
+    /// True tool poses in `Bb`: effector poses times the true marker mountings, and the tip
+    /// of [`TrueRobot::pose`] (with its sag).
     pub fn tool_poses(&self) -> Result<ToolPoses, KinematicsError> {
         let pose = self.pose()?;
         let markers = &self.truth.params.markers;

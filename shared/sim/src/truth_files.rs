@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::effect_spec::SimEffect;
 use crate::session::{FrameTruth, Truth, ValidationTruth};
 use crate::tracker::TrackerTruth;
-use crate::truth::{RobotTruth, ThermalDrift};
+use crate::truth::{needle_sag_mm, LinkDrift, RobotTruth, ThermalDrift};
 use crate::SimError;
 
 /// Name of the truth directory inside a recording directory.
@@ -281,6 +281,8 @@ impl Truth {
                 stop_side: file.robot.stop_side,
                 power_up_joints: file.robot.power_up_joints,
                 thermal,
+                link_drift: LinkDrift::all_in(&effects),
+                needle_sag_mm: needle_sag_mm(&effects),
             },
             effects,
             tracker,

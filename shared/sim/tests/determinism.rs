@@ -73,6 +73,9 @@ fn written_recording_and_truth_read_back_equal_to_memory() {
     config.effects = vec![
         "thermal:joint=3,amplitude=0.002,tau_s=60".parse().unwrap(),
         "link:link=l_b,delta=0.3".parse().unwrap(),
+        "thermal:link=l_fe,delta=0.2,tau_s=30".parse().unwrap(),
+        "sag:mm=0.4".parse().unwrap(),
+        "clockdrift:ppm=120".parse().unwrap(),
     ];
     let (recording, truth) = record_session(&config).unwrap();
     let dir = root.join("rec");
@@ -92,6 +95,19 @@ fn written_recording_and_truth_read_back_equal_to_memory() {
     assert_eq!(read_truth.robot.params, truth.robot.params);
     assert_eq!(read_truth.robot.stops, truth.robot.stops);
     assert_eq!(read_truth.robot.thermal, truth.robot.thermal);
+    assert_eq!(read_truth.robot.link_drift, truth.robot.link_drift);
+    assert_eq!(read_truth.robot.link_drift.len(), 1);
+    assert_eq!(read_truth.robot.needle_sag_mm, 0.4);
+    let effects_toml = std::fs::read_to_string(truth_dir(&dir).join("effects.toml")).unwrap();
+    for spec in [
+        "thermal:link=l_fe,delta=0.2,tau_s=30",
+        "sag:mm=0.4",
+        "clockdrift:ppm=120",
+    ] {
+        assert!(effects_toml.contains(spec), "{spec} not in {effects_toml}");
+    }
+    assert_eq!(read_truth.tracker.period_ns, truth.tracker.period_ns);
+    assert_eq!(truth.tracker.period_ns, 5e7 * (1.0 + 120.0 * 1e-6));
     assert_eq!(read_truth.effects, truth.effects);
     assert_eq!(read_truth.validation, truth.validation);
     assert_eq!(read_truth.frames, truth.frames);

@@ -149,14 +149,17 @@ fn plans_stay_reachable_over_many_seeds_and_bad_configs_are_refused() {
         assert!(matches!(err, SimError::Config(_)), "{err}");
         assert!(err.to_string().contains("duration scale"), "{err}");
     }
-    let mut config = SimConfig::new(1);
-    config.effects = vec![
-        "latency:ms=5".parse().unwrap(),
-        "latency:ms=6".parse().unwrap(),
-    ];
-    let err = Session::new(&config).unwrap_err().to_string();
-    assert!(
-        err.contains("latency effect is given more than once"),
-        "{err}"
-    );
+    for (name, twice) in [
+        ("latency", ["latency:ms=5", "latency:ms=6"]),
+        ("sag", ["sag:mm=0.4", "sag:mm=0.2"]),
+        ("clockdrift", ["clockdrift:ppm=10", "clockdrift:ppm=10"]),
+    ] {
+        let mut config = SimConfig::new(1);
+        config.effects = twice.iter().map(|s| s.parse().unwrap()).collect();
+        let err = Session::new(&config).unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("the {name} effect is given more than once")),
+            "{err}"
+        );
+    }
 }
