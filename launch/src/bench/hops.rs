@@ -1,4 +1,4 @@
-//! The live-graph hops of issue 8 and their summary as ratios to the ping-pong baselines
+//! The live-graph hops and their summary as ratios to the ping-pong baselines
 //! measured in the same run.
 
 use super::payload::{baseline_name, Payload, Transport};
@@ -52,7 +52,7 @@ pub const SETPOINT_TO_RIG: &str = "hop/setpoint-to-rig";
 /// |sync's exposure time − the rig's true exposure time| of a tracker frame.
 pub const MATCHING_ERROR: &str = "hop/matching-error";
 
-/// The hops issue 8 asks for, in the order printed.
+/// The hops the benchmark measures, in the order printed.
 pub const HOPS: [HopSpec; 5] = [
     HopSpec {
         name: ENCODER_TO_SUBSCRIBER,

@@ -1,6 +1,6 @@
 //! Two effects at once are both found, and the outputs carry them: `report.json` lists them
 //! with their parameters, standard deviations and errors before and after, `report.html`
-//! shows the residual plots, `params.toml` holds them (issue 5).
+//! shows the residual plots, `params.toml` holds them.
 //!
 //! Release only: `cargo test --release -p sabr-calibration --test effects_combined`.
 

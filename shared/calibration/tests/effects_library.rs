@@ -1,6 +1,6 @@
 //! The residual loop names the effect the simulator injected — the calibrator is not told —
 //! and the model with it reaches a held-out tip error within 1.5× of the same seed without
-//! the effect (issue 5). One test per effect class the simulator can inject.
+//! the effect. One test per effect class the simulator can inject.
 //!
 //! Release only (each calibrates two or three simulated sessions):
 //! `cargo test --release -p sabr-calibration --test effects_library`.

@@ -1,4 +1,4 @@
-//! Calibration of simulated sessions against the simulator's truth (issue 4, "must show").
+//! Calibration of simulated sessions against the simulator's truth.
 //!
 //! Heavy (a 5-minute session per seed): ignored in debug builds; run with
 //! `cargo test --release -p sabr-calibration --test sim_accuracy`.

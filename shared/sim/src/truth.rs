@@ -50,7 +50,7 @@ pub struct Perturbation {
 }
 
 impl Default for Perturbation {
-    /// The amounts of issue 3: gear ratios ±3 %, stops ±2°, front base ±1.5 mm / ±0.6°,
+    /// The default amounts: gear ratios ±3 %, stops ±2°, front base ±1.5 mm / ±0.6°,
     /// needle ±3 mm, mountings ±1 mm / ±2°; nominal tip error 3–6 mm RMS as in the paper.
     fn default() -> Self {
         Perturbation {
