@@ -7,7 +7,7 @@
 
 mod effects_support;
 
-use effects_support::{config, run, truth_tip_rms};
+use effects_support::{assert_absorbed, config, run};
 
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only")]
@@ -65,27 +65,8 @@ fn needle_sag_is_reported_as_structure_with_its_correlate_and_not_claimed() {
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only")]
 fn link_thermal_drift_and_tracker_clock_drift_are_absorbed_without_a_claim() {
-    let seed = 15;
-    let clean = run(&config(seed, 0.25, &[]));
-    let reference = truth_tip_rms(&clean.calibration.params, &clean);
-    for spec in ["thermal:link=l_b,delta=0.3,tau_s=60", "clockdrift:ppm=300"] {
-        let with = run(&config(seed, 0.25, &[spec]));
-        let report = &with.calibration.report;
-        assert!(
-            report.effects.is_empty(),
-            "{spec}: {}",
-            report.r#final.verdict
-        );
-        assert!(report.r#final.leads.is_empty(), "{spec}");
-        let tip = truth_tip_rms(&with.calibration.params, &with);
-        assert!(
-            tip <= 1.5 * reference,
-            "{spec}: {tip:.4} mm vs {reference:.4} mm"
-        );
-        let latency_error = report.r#final.latency_ms - with.truth.tracker.latency_ms();
-        assert!(
-            latency_error.abs() <= 2.0,
-            "{spec}: latency off by {latency_error:.3} ms"
-        );
-    }
+    assert_absorbed(
+        15,
+        &["thermal:link=l_b,delta=0.3,tau_s=60", "clockdrift:ppm=300"],
+    );
 }

@@ -7,7 +7,9 @@
 
 mod effects_support;
 
-use effects_support::{assert_discovers, assert_parameter, config, run, truth_tip_rms, Named};
+use effects_support::{
+    assert_absorbed, assert_discovers, assert_parameter, config, run, truth_tip_rms, Named,
+};
 
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only")]
@@ -174,25 +176,11 @@ fn front_axis_tilt_absorbed_by_the_paper_parameters_is_not_claimed() {
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only")]
 fn realistic_compliance_is_absorbed_without_a_false_claim() {
-    let seed = 15;
-    let clean = run(&config(seed, 0.25, &[]));
-    let reference = truth_tip_rms(&clean.calibration.params, &clean);
-    for spec in [
-        "compliance:joint=1,gain=0.003",
-        "compliance:joint=3,gain=0.005",
-    ] {
-        let with = run(&config(seed, 0.25, &[spec]));
-        let report = &with.calibration.report;
-        assert!(
-            report.effects.is_empty(),
-            "{spec}: {}",
-            report.r#final.verdict
-        );
-        assert!(report.r#final.leads.is_empty(), "{spec}");
-        let tip = truth_tip_rms(&with.calibration.params, &with);
-        assert!(
-            tip <= 1.5 * reference,
-            "{spec}: {tip:.4} mm vs {reference:.4} mm"
-        );
-    }
+    assert_absorbed(
+        15,
+        &[
+            "compliance:joint=1,gain=0.003",
+            "compliance:joint=3,gain=0.005",
+        ],
+    );
 }

@@ -217,3 +217,32 @@ pub fn assert_parameter(run: &Run, index: usize, name: &str, expected: f64) {
         "{name}: fitted {value} ± {std}, injected {expected}"
     );
 }
+
+/// Asserts that each of `specs`, injected alone into seed `seed`, is absorbed: no effect is
+/// claimed, no lead reported, the tracker latency is still measured within 2 ms, and the
+/// held-out tip error stays within 1.5× the clean session's.
+pub fn assert_absorbed(seed: u64, specs: &[&str]) {
+    let clean = run(&config(seed, 0.25, &[]));
+    let reference = truth_tip_rms(&clean.calibration.params, &clean);
+    for spec in specs {
+        let with = run(&config(seed, 0.25, &[spec]));
+        let report = &with.calibration.report;
+        assert!(
+            report.effects.is_empty(),
+            "{spec}: {}",
+            report.r#final.verdict
+        );
+        assert!(report.r#final.leads.is_empty(), "{spec}");
+        let tip = truth_tip_rms(&with.calibration.params, &with);
+        eprintln!("{spec}: tip {tip:.4} mm, clean {reference:.4} mm");
+        assert!(
+            tip <= 1.5 * reference,
+            "{spec}: {tip:.4} mm vs {reference:.4} mm"
+        );
+        let latency_error = report.r#final.latency_ms - with.truth.tracker.latency_ms();
+        assert!(
+            latency_error.abs() <= 2.0,
+            "{spec}: latency off by {latency_error:.3} ms"
+        );
+    }
+}
