@@ -16,7 +16,8 @@
 //!    quantile of a family-wise level [`SELECTION_LEVEL`] over all candidates, positive
 //!    held-out gain, and a lower held-out error in at least [`MIN_FOLDS_IMPROVED`] of the
 //!    folds, and identifiable: at least [`MIN_IDENTIFIABLE`] of its columns outside the span
-//!    of the fitted parameters. A library winner is added to the model (its linearised coefficients start the
+//!    of the fitted parameters. A library candidate within [`LIBRARY_PREFERENCE`] of the best
+//!    held-out gain wins over a probe. A library winner is added to the model (its linearised coefficients start the
 //!    fit), everything is refitted jointly ([`joint_fit`] on the extended layout) and kept
 //!    only if the refit gains as much as the test demanded. A probe winner is structure the
 //!    library does not explain: it is reported as a lead, never added, and the following
@@ -56,6 +57,9 @@ pub const MIN_IDENTIFIABLE: f64 = 1e-3;
 /// Correlation beyond the fitted parameters at which two candidates are reported as
 /// aliases of each other.
 pub const ALIAS_CORRELATION: f64 = 0.9;
+/// Share of the best probe's held-out gain at which a significant library candidate is
+/// preferred to it.
+pub const LIBRARY_PREFERENCE: f64 = 0.9;
 /// Correlates listed in the outcome.
 const CORRELATES_REPORTED: usize = 8;
 
@@ -225,15 +229,26 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
         }
         loop {
             let open = (0..round.pool.len()).filter(|k| !conditioned.contains(k));
-            let best = round
+            let significant: Vec<Evaluation<M>> = round
                 .evaluate(&base, open)
                 .into_iter()
                 .filter(Evaluation::significant)
+                .collect();
+            let best = significant
+                .iter()
                 .max_by(|a, b| a.held_out_gain.total_cmp(&b.held_out_gain))?;
+            // A library effect that does nearly as well as a probe is the more specific
+            // explanation (e.g. a ripple of a motor turning less than a revolution looks like
+            // a smooth function of the joint angle): it is added, and the probe is re-checked
+            // at the final fit.
+            let library = significant
+                .iter()
+                .filter(|e| e.info.in_library)
+                .max_by(|a, b| a.held_out_gain.total_cmp(&b.held_out_gain))
+                .filter(|e| e.held_out_gain >= LIBRARY_PREFERENCE * best.held_out_gain);
+            let best = library.unwrap_or(best).clone();
             if best.info.in_library {
-                let mut best = best;
-                best.aliases = round.aliases(&base, best.index);
-                return Some(best);
+                return Some(round.with_aliases(&base, best));
             }
             tracing::debug!(probe = best.info.label, "structure outside the library");
             conditioned.push(best.index);
@@ -244,15 +259,34 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
     }
 
     /// Adds the chosen effect and refits; keeps it if the refit gains as much as the
-    /// selection test demanded, otherwise rejects the candidate.
+    /// selection test demanded, otherwise rejects the candidate. When the data can hardly
+    /// tell the choice from some other library candidates (its aliases), each of them is
+    /// refitted in its place and the best refit is kept, named with the others as aliases.
     fn try_add(&mut self, choice: &Evaluation<M>) {
         tracing::debug!(
             candidate = choice.info.label,
             gain = choice.chi2_gain,
             "adding an effect"
         );
-        match add_effect(self.data, &self.fit, choice) {
-            Some(added) if added.refit_gain >= choice.threshold => {
+        let refits = std::iter::once(choice)
+            .chain(&choice.alternatives)
+            .filter_map(|candidate| {
+                let added = add_effect(self.data, &self.fit, candidate)?;
+                (added.refit_gain >= candidate.threshold).then_some((candidate, added))
+            });
+        let best = refits.max_by(|a, b| a.1.refit_gain.total_cmp(&b.1.refit_gain));
+        let best = best.map(|(winner, added)| {
+            let mut winner = winner.clone();
+            winner.aliases = std::iter::once(&choice.info.label)
+                .chain(&choice.aliases)
+                .filter(|label| **label != winner.info.label)
+                .cloned()
+                .collect();
+            (winner, added)
+        });
+        match best {
+            Some((choice, added)) => {
+                let choice = &choice;
                 let after = self
                     .judge
                     .metrics(&format!("+ {}", choice.info.label), &added.fit);
@@ -262,7 +296,7 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
                     .push(effect_report(choice, &added, before, after));
                 self.fit = added.fit;
             }
-            _ => self.rejected.push(choice.candidate),
+            None => self.rejected.push(choice.candidate),
         }
     }
 

@@ -28,6 +28,9 @@ pub(super) struct Evaluation<M: RobotModel> {
     pub(super) identifiable: f64,
     /// Labels of the candidates it can hardly be told from (filled for a selected one).
     pub(super) aliases: Vec<String>,
+    /// The library candidates among those aliases, scored alike: refitted in its place
+    /// when it is added, the best refit wins.
+    pub(super) alternatives: Vec<Evaluation<M>>,
 }
 
 impl<M: RobotModel> Evaluation<M> {
@@ -141,13 +144,14 @@ impl<M: RobotModel> Round<M> {
             explained_share: (without.sse - with.sse) / without.sse.max(f64::MIN_POSITIVE),
             identifiable,
             aliases: Vec::new(),
+            alternatives: Vec::new(),
         })
     }
 
-    /// The labels of the pool's one-parameter candidates whose columns, beyond `base`, are
-    /// so alike those of the one-parameter candidate `chosen` (correlation at least
-    /// [`ALIAS_CORRELATION`]) that the data can hardly tell which of them acts.
-    pub(super) fn aliases(&self, base: &[usize], chosen: usize) -> Vec<String> {
+    /// The pool's one-parameter candidates whose columns, beyond `base`, are so alike those
+    /// of the one-parameter candidate `chosen` (correlation at least [`ALIAS_CORRELATION`])
+    /// that the data can hardly tell which of them acts.
+    pub(super) fn aliases(&self, base: &[usize], chosen: usize) -> Vec<usize> {
         let own = &self.ranges[chosen];
         if own.len() != 1 {
             return Vec::new();
@@ -163,7 +167,21 @@ impl<M: RobotModel> Round<M> {
                         scale > 0.0 && (g[(0, 1)] / scale).abs() >= ALIAS_CORRELATION
                     })
             })
-            .map(|k| self.infos[k].label.clone())
             .collect()
+    }
+
+    /// `chosen` with its aliases named and the library ones among them scored on `base`.
+    pub(super) fn with_aliases(&self, base: &[usize], mut chosen: Evaluation<M>) -> Evaluation<M> {
+        let aliases = self.aliases(base, chosen.index);
+        chosen.aliases = aliases
+            .iter()
+            .map(|&k| self.infos[k].label.clone())
+            .collect();
+        chosen.alternatives = self
+            .evaluate(base, aliases.into_iter())
+            .into_iter()
+            .filter(|e| e.info.in_library)
+            .collect();
+        chosen
     }
 }

@@ -9,6 +9,7 @@
 //! finite differences of the kinematics.
 
 use nalgebra::{DMatrix, Vector3};
+use sabr_model::effects::apply_joint_effects;
 use sabr_model::effects::linear::RIPPLE_HARMONICS;
 use sabr_model::{Effect, EffectSlot, JointMotion, Link, JOINT_COUNT};
 
@@ -134,7 +135,9 @@ impl Candidate {
             Candidate::Library(EffectSlot::TransmissionRipple { .. }) => {
                 "sin/cos of the harmonic of the motor angle"
             }
-            Candidate::Library(EffectSlot::Backlash { .. }) => "sign of the joint velocity",
+            Candidate::Library(EffectSlot::Backlash { .. }) => {
+                "offset of a 6 mrad play (sign of the velocity, ramping after each reversal)"
+            }
             Candidate::Library(EffectSlot::JointCompliance { .. }) => "gravity-torque feature",
             Candidate::Library(EffectSlot::LinkLength { .. }) => "sensitivity to the link length",
             Candidate::Library(EffectSlot::AxisTilt { .. }) => {
@@ -174,12 +177,20 @@ impl Candidate {
     }
 }
 
+/// Backlash width (rad) whose play shapes the backlash candidates' signal: a play's offset
+/// ramps over the first gap-width of travel after each reversal, which a narrower trial
+/// (or the sign of the velocity, the limit of zero width) misses for the wide plays of
+/// real transmissions (5–10 mrad).
+const BACKLASH_TRIAL_WIDTH: f64 = 0.006;
+
 /// Per-observation signals the joint-side candidates multiply `∂r/∂q_j` by.
 struct Signals {
     motor: [f64; 5],
     joints: [f64; 5],
     velocity: [f64; 5],
     motion: JointMotion,
+    /// Per joint: the offset of a play of [`BACKLASH_TRIAL_WIDTH`], per unit width.
+    play: [f64; 5],
     time: f64,
 }
 
@@ -268,6 +279,7 @@ fn observation_signals(model: &BiopsyModel, observations: &[Observation]) -> Vec
             (a.min(o.exposure_ns), b.max(o.exposure_ns))
         });
     let span = (end - start).max(1.0);
+    let scale = robot.encoder_scale();
     observations
         .iter()
         .map(|obs| {
@@ -275,11 +287,22 @@ fn observation_signals(model: &BiopsyModel, observations: &[Observation]) -> Vec
             let motor = robot.motor_angles_fractional(&counts);
             let rates = robot.motor_angles_fractional(&obs.count_rates);
             let offset = robot.joints.offset.unwrap_or_default();
+            let joints: [f64; 5] =
+                std::array::from_fn(|j| robot.joints.gear_ratio[j] * motor[j] + offset[j]);
+            let play = std::array::from_fn(|joint| {
+                let trial = Effect::Backlash {
+                    joint,
+                    width: BACKLASH_TRIAL_WIDTH,
+                };
+                let q = apply_joint_effects(&[trial], &joints, &motor, &scale, &obs.motion);
+                (q[joint] - joints[joint]) / BACKLASH_TRIAL_WIDTH
+            });
             Signals {
                 motor,
-                joints: std::array::from_fn(|j| robot.joints.gear_ratio[j] * motor[j] + offset[j]),
+                joints,
                 velocity: std::array::from_fn(|j| robot.joints.gear_ratio[j] * rates[j]),
                 motion: obs.motion,
+                play,
                 time: 2.0 * (obs.exposure_ns - start) / span - 1.0,
             }
         })
@@ -289,6 +312,7 @@ fn observation_signals(model: &BiopsyModel, observations: &[Observation]) -> Vec
 /// The signal values (up to two) a joint-side candidate multiplies `∂r/∂q_j` by.
 fn joint_signal(candidate: &Candidate, s: &Signals) -> [f64; 2] {
     match *candidate {
+        Candidate::Library(EffectSlot::Backlash { joint }) => [s.play[joint], 0.0],
         Candidate::Library(slot) => slot.joint_signals(&s.motor, &s.joints, &s.motion),
         Candidate::JointHarmonic { joint, harmonic } => {
             let (sin, cos) = (f64::from(harmonic) * s.joints[joint]).sin_cos();
