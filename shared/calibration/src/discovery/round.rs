@@ -148,24 +148,38 @@ impl<M: RobotModel> Round<M> {
         })
     }
 
-    /// The pool's one-parameter candidates whose columns, beyond `base`, are so alike those
-    /// of the one-parameter candidate `chosen` (correlation at least [`ALIAS_CORRELATION`])
-    /// that the data can hardly tell which of them acts.
+    /// The pool's candidates so alike the candidate `chosen` beyond the columns `base` that
+    /// the data can hardly tell which of them acts: the multiple correlation of a
+    /// one-parameter candidate's column with the other's columns is at least
+    /// [`ALIAS_CORRELATION`] (pairs of multi-parameter candidates are not compared).
     pub(super) fn aliases(&self, base: &[usize], chosen: usize) -> Vec<usize> {
         let own = &self.ranges[chosen];
-        if own.len() != 1 {
-            return Vec::new();
-        }
         (0..self.pool.len())
-            .filter(|&k| k != chosen && self.ranges[k].len() == 1)
-            .filter(|&k| !self.design.is_empty_column(self.ranges[k][0]))
+            .filter(|&k| k != chosen && (own.len() == 1 || self.ranges[k].len() == 1))
             .filter(|&k| {
+                !self.ranges[k]
+                    .iter()
+                    .any(|&c| self.design.is_empty_column(c))
+            })
+            .filter(|&k| {
+                let (single, many) = if own.len() == 1 {
+                    (own[0], &self.ranges[k])
+                } else {
+                    (self.ranges[k][0], own)
+                };
+                let set: Vec<usize> = std::iter::once(single)
+                    .chain(many.iter().copied())
+                    .collect();
                 self.design
-                    .conditional_gram(base, &[own[0], self.ranges[k][0]])
-                    .is_some_and(|g| {
-                        let scale = (g[(0, 0)] * g[(1, 1)]).sqrt();
-                        scale > 0.0 && (g[(0, 1)] / scale).abs() >= ALIAS_CORRELATION
+                    .conditional_gram(base, &set)
+                    .and_then(|g| {
+                        let n = many.len();
+                        let cross = g.view((0, 1), (1, n)).transpose();
+                        let inner = g.view((1, 1), (n, n)).into_owned().cholesky()?;
+                        let explained = (cross.transpose() * inner.solve(&cross))[(0, 0)];
+                        Some(g[(0, 0)] > 0.0 && explained / g[(0, 0)] >= ALIAS_CORRELATION.powi(2))
                     })
+                    .unwrap_or(false)
             })
             .collect()
     }
