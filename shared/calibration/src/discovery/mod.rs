@@ -198,6 +198,8 @@ struct Search<'a, M: RobotModel, D, J: Judge<M>> {
     current: J::Metrics,
     steps: Vec<J::Metrics>,
     effects: Vec<EffectReport<J::Metrics>>,
+    /// The parameters of each added effect, in the order of its report's `parameters`.
+    effect_params: Vec<Vec<M::Param>>,
     leads: Vec<Correlate>,
     nuisance: Vec<M::Candidate>,
     rejected: Vec<M::Candidate>,
@@ -292,6 +294,8 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
                     .metrics(&format!("+ {}", choice.info.label), &added.fit);
                 self.steps.push(after.clone());
                 let before = std::mem::replace(&mut self.current, after.clone());
+                self.effect_params
+                    .push(added.parameters.iter().map(|(id, _)| *id).collect());
                 self.effects
                     .push(effect_report(choice, &added, before, after));
                 self.fit = added.fit;
@@ -300,8 +304,19 @@ impl<M: RobotModel, D: Dataset<M>, J: Judge<M>> Search<'_, M, D, J> {
         }
     }
 
-    /// The outcome, from the last round (at the final fit).
-    fn finish(self, last: &Round<M>, base_label: &str) -> Discovery<M, J::Metrics> {
+    /// The outcome, from the last round (at the final fit). Every effect's parameters are
+    /// reported as the final fit has them (an effect added later refits the earlier ones).
+    fn finish(mut self, last: &Round<M>, base_label: &str) -> Discovery<M, J::Metrics> {
+        for (effect, ids) in self.effects.iter_mut().zip(&self.effect_params) {
+            for (value, &id) in effect.parameters.iter_mut().zip(ids) {
+                value.value = self.fit.model.get(id);
+                value.std_dev = self
+                    .fit
+                    .layout
+                    .position(id)
+                    .map(|k| self.fit.analysis.std_devs[k]);
+            }
+        }
         let fitted: Vec<usize> = (0..last.design.fitted).collect();
         let mut correlates: Vec<Correlate> = last
             .evaluate(&fitted, 0..last.pool.len())
@@ -359,6 +374,7 @@ pub fn discover<M: RobotModel, D: Dataset<M>, J: Judge<M>>(
         current,
         fit: base,
         effects: Vec::new(),
+        effect_params: Vec::new(),
         leads: Vec::new(),
         nuisance: Vec::new(),
         rejected: Vec::new(),
