@@ -9,31 +9,38 @@ mod effects_support;
 
 use effects_support::{assert_absorbed, config, run};
 
-#[test]
-#[cfg_attr(debug_assertions, ignore = "release only")]
-fn thermal_drift_is_reported_as_structure_and_not_claimed() {
-    let run = run(&config(
-        8,
-        0.25,
-        &["thermal:joint=3,amplitude=0.003,tau_s=20"],
-    ));
+/// Calibrates seed `seed` with `spec` and asserts that no library effect is claimed, while
+/// the residual is reported as structured with `correlate` as its first lead and strongest
+/// correlate, named in the verdict.
+fn assert_reported_not_claimed(seed: u64, spec: &str, correlate: &str) {
+    let run = run(&config(seed, 0.25, &[spec]));
     let report = &run.calibration.report;
     let last = &report.r#final;
     assert!(
         report.effects.is_empty(),
-        "claimed {:?}",
+        "{spec}: claimed {:?}",
         last.effects_added
     );
     assert!(run.calibration.params.effects.is_empty());
-    assert!(last.structured_residual);
+    assert!(last.structured_residual, "{spec}");
     let lead = last.leads.first().expect("a lead");
-    assert_eq!(lead.label, "drift_in_time θ3", "{:?}", last.leads);
+    assert_eq!(lead.label, correlate, "{spec}: {:?}", last.leads);
     assert!(!lead.in_library && lead.significant);
-    assert_eq!(last.strongest_correlates[0].label, "drift_in_time θ3");
+    assert_eq!(last.strongest_correlates[0].label, correlate);
     assert!(
-        last.verdict.contains("not claimed") && last.verdict.contains("drift_in_time θ3"),
+        last.verdict.contains("not claimed") && last.verdict.contains(correlate),
         "{}",
         last.verdict
+    );
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only")]
+fn thermal_drift_is_reported_as_structure_and_not_claimed() {
+    assert_reported_not_claimed(
+        8,
+        "thermal:joint=3,amplitude=0.003,tau_s=20",
+        "drift_in_time θ3",
     );
 }
 
@@ -43,19 +50,7 @@ fn thermal_drift_is_reported_as_structure_and_not_claimed() {
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only")]
 fn needle_sag_is_reported_as_structure_with_its_correlate_and_not_claimed() {
-    let run = run(&config(15, 0.25, &["sag:mm=2.0"]));
-    let report = &run.calibration.report;
-    let last = &report.r#final;
-    assert!(
-        report.effects.is_empty(),
-        "claimed {:?}",
-        last.effects_added
-    );
-    assert!(last.structured_residual);
-    assert_eq!(last.leads[0].label, "needle_elevation", "{:?}", last.leads);
-    assert!(!last.leads[0].in_library && last.leads[0].significant);
-    assert_eq!(last.strongest_correlates[0].label, "needle_elevation");
-    assert!(last.verdict.contains("not claimed"), "{}", last.verdict);
+    assert_reported_not_claimed(15, "sag:mm=2.0", "needle_elevation");
 }
 
 /// Effects the simulator adds that the paper's parameters and the clock line absorb: a
