@@ -12,8 +12,8 @@ use nix::unistd::Pid;
 use sabr_integration_tests::{bin, process_alive, LaunchedGraph};
 use sabr_msgs::{services, EncoderSample, MatchedSample, TrackerFrame};
 use sabr_node::iceoryx2::node::{Node, NodeState};
-use sabr_node::iceoryx2::prelude::{ipc, CallbackProgression};
-use sabr_node::{Domain, Message, NodeRuntime, Subscriber};
+use sabr_node::iceoryx2::prelude::CallbackProgression;
+use sabr_node::{Domain, Doorbell, Message, NodeRuntime, Subscriber};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -125,7 +125,7 @@ fn pid_of(graph: &mut LaunchedGraph, node: &str) -> u32 {
 /// Nodes of `domain` whose process died and whose resources are still there.
 fn dead_nodes(domain: &Domain) -> usize {
     let mut dead = 0;
-    Node::<ipc::Service>::list(&domain.iceoryx_config(), |state| {
+    Node::<Doorbell>::list(&domain.iceoryx_config(), |state| {
         dead += usize::from(matches!(state, NodeState::Dead(_)));
         CallbackProgression::Continue
     })

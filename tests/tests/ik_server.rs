@@ -12,9 +12,7 @@ use sabr_msgs::{
     services, FixedString, IkRequest, IkResponse, IkStatus, LifecycleState,
     ParameterSetAnnouncement,
 };
-use sabr_node::iceoryx2::port::notifier::Notifier;
-use sabr_node::iceoryx2::prelude::ipc;
-use sabr_node::{Client, Domain, GraphObserver, NodeRuntime};
+use sabr_node::{Domain, DoorbellClient, GraphObserver, NodeRuntime};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -93,11 +91,10 @@ fn sabr_ik(dir: &Path, params: &Path, targets: &[[f64; 6]]) -> Vec<Result<Vec<f6
         .collect()
 }
 
-/// A hand-made client, as a benchmark would build it: `NodeRuntime::client` plus the
-/// notifier that wakes the server.
+/// A hand-made client, as a benchmark would build it: `NodeRuntime::client` on the graph's
+/// doorbell transport (sending rings the server; the answer rings this process back).
 struct TestClient {
-    client: Client<IkRequest, IkResponse>,
-    wake: Notifier<ipc::Service>,
+    client: DoorbellClient<IkRequest, IkResponse>,
     next_id: u64,
 }
 
@@ -107,7 +104,6 @@ impl TestClient {
             client: rt
                 .client::<IkRequest, IkResponse>(services::IK_SOLVE)
                 .unwrap(),
-            wake: rt.notifier(services::IK_SOLVE).unwrap(),
             next_id: 1,
         }
     }
@@ -120,23 +116,18 @@ impl TestClient {
             direction: [target[3], target[4], target[5]],
             near_joints_rad: HOME_JOINTS,
         };
-        let pending = self.client.send_copy(request).unwrap();
-        assert_eq!(
-            pending.number_of_server_connections(),
-            1,
-            "server connected"
-        );
-        self.wake.notify().unwrap();
-        let start = Instant::now();
-        loop {
-            if let Some(response) = pending.receive().unwrap() {
-                let response = *response.payload();
-                assert_eq!(response.id, request.id);
-                return response;
-            }
-            assert!(start.elapsed() < Duration::from_secs(5), "no answer");
-            std::thread::yield_now();
-        }
+        let pending = self
+            .client
+            .send(request)
+            .unwrap()
+            .expect("server connected");
+        let response = self
+            .client
+            .receive(&pending, Duration::from_secs(5))
+            .unwrap()
+            .expect("an answer within 5 s");
+        assert_eq!(response.id, request.id);
+        response
     }
 }
 

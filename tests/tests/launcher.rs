@@ -6,8 +6,8 @@ use nix::unistd::Pid;
 use sabr_integration_tests::{process_alive, LaunchedGraph};
 use sabr_msgs::{services, EncoderSample, LifecycleState};
 use sabr_node::iceoryx2::node::{Node, NodeState};
-use sabr_node::iceoryx2::prelude::{ipc, CallbackProgression};
-use sabr_node::NodeRuntime;
+use sabr_node::iceoryx2::prelude::CallbackProgression;
+use sabr_node::{Doorbell, NodeRuntime};
 use std::time::{Duration, Instant};
 
 const LONG: Duration = Duration::from_secs(15);
@@ -120,7 +120,7 @@ required = false
     eprintln!("worker recovered {recovered:?} after SIGKILL");
     // The launcher removed the killed node's resources when it noticed the death.
     let mut dead = 0;
-    Node::<ipc::Service>::list(&graph.domain.iceoryx_config(), |state| {
+    Node::<Doorbell>::list(&graph.domain.iceoryx_config(), |state| {
         dead += usize::from(matches!(state, NodeState::Dead(_)));
         CallbackProgression::Continue
     })

@@ -13,17 +13,8 @@
 
 mod live;
 
-use clap::Parser;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    let args = live::Args::parse();
-    match live::run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            println!("FAILED: {error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("calibrator", live::run)
 }

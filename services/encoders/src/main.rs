@@ -13,19 +13,16 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::bail;
-use clap::Parser;
 use sabr_msgs::{services, CounterLatch, EncoderSample};
-use sabr_node::{monotonic_ns, Deadline, Exit, NodeRuntime};
+use sabr_node::{monotonic_ns, Deadline, Exit, NodeRuntime, StatusTimer};
 
 use sampler::{Reading, Sampler};
 
-/// Period of the status line in the log.
-const STATUS_PERIOD: u64 = 10_000;
 /// Longest single wait for the first latch before checking for a stop request.
 const WAIT_SLICE: Duration = Duration::from_millis(100);
 
 /// Command line of the encoder sampler.
-#[derive(Debug, Parser)]
+#[derive(Debug, clap::Parser)]
 #[command(name = "sabr-encoders", about)]
 struct Args {
     /// Sampling rate, Hz.
@@ -40,17 +37,10 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    sabr_node::init_tracing();
-    match run(&Args::parse()) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("encoders", run)
 }
 
-fn run(args: &Args) -> anyhow::Result<Exit> {
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     if !(args.rate_hz.is_finite() && (1.0..=10_000.0).contains(&args.rate_hz)) {
         bail!("--rate-hz {}: must be between 1 and 10000", args.rate_hz);
     }
@@ -59,7 +49,6 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
     }
     let rig_timeout = Duration::from_millis(args.rig_timeout_ms);
     let rig_timeout_ns = rig_timeout.as_nanos() as i64;
-    let mut rt = NodeRuntime::start("encoders")?;
     let register = rt.subscriber::<CounterLatch>(services::RIG_COUNTERS)?;
     let out = rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES)?;
     let mut sampler = Sampler::new((args.stale_ms * 1e6) as i64);
@@ -84,6 +73,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
 
     let period = Duration::from_secs_f64(1.0 / args.rate_hz);
     let mut stats = Stats::default();
+    let mut status = StatusTimer::new();
     let exit = rt.run_loop(period, |ctx| {
         register.drain(|latch| sampler.latch(latch))?;
         let now = monotonic_ns();
@@ -120,7 +110,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
             Reading::NoData => bail!("the counter register lost its first latch"),
         }
         stats.missed_periods = ctx.missed_periods();
-        if ctx.tick() % STATUS_PERIOD == STATUS_PERIOD - 1 {
+        if status.due() {
             stats.log();
         }
         Ok::<_, anyhow::Error>(())

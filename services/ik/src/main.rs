@@ -5,8 +5,9 @@
 use anyhow::Context;
 use clap::Parser;
 use sabr_ik::{server, IkSolver, ParameterSet};
-use sabr_node::NodeRuntime;
+use sabr_node::{Exit, NodeRuntime};
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 /// The IK server of the SABR graph (request-response on `sabr/ik/solve`).
 #[derive(Debug, Parser)]
@@ -20,9 +21,11 @@ struct Args {
     params: Option<PathBuf>,
 }
 
-fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
-    let mut rt = NodeRuntime::start("ik")?;
+fn main() -> ExitCode {
+    sabr_node::service_main("ik", run)
+}
+
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     let mut solver = match &args.params {
         Some(path) => {
             let set = ParameterSet::load(path, 0).context("--params")?;
@@ -38,12 +41,12 @@ fn main() -> anyhow::Result<()> {
             IkSolver::new()
         }
     };
-    let counts = server::serve(&mut rt, &mut solver)?;
+    let (exit, counts) = server::serve(rt, &mut solver)?;
     tracing::info!(
         solved = counts.solved,
         refused = counts.refused,
         send_failures = counts.send_failures,
         "IK server stopped"
     );
-    Ok(())
+    Ok(exit)
 }

@@ -13,8 +13,6 @@ mod limits;
 mod line;
 mod plan;
 
-use anyhow::Context;
-use clap::Parser;
 use executor::{Event, Executor, Outcome};
 use line::{IkService, LineSpec};
 use sabr_ik::{IkClient, ParameterSet};
@@ -26,9 +24,6 @@ use sabr_node::{monotonic_ns, Exit, NodeRuntime, Publisher};
 use std::path::Path;
 use std::process::ExitCode;
 use std::time::Duration;
-
-/// How often an idle (finished or faulted) node wakes: heartbeat and stop check.
-const IDLE_PERIOD: Duration = Duration::from_millis(100);
 
 /// The IK server as the line planner sees it.
 struct RemoteIk {
@@ -159,15 +154,14 @@ fn load_announced(announcement: &ParameterSetAnnouncement) -> Option<ParameterSe
     }
 }
 
-fn run(args: &cli::Args) -> anyhow::Result<ExitCode> {
-    let mut rt = NodeRuntime::start("motion")?;
-    let mut outputs = Outputs::new(&rt)?;
+fn run(args: &cli::Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
+    let mut outputs = Outputs::new(rt)?;
     let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
     let frames = rt.subscriber::<TrackerFrame>(services::TRACKER_FRAMES)?;
     let announcements =
         rt.subscriber::<ParameterSetAnnouncement>(services::CALIBRATOR_PARAMETERS)?;
     let mut ik = RemoteIk {
-        client: IkClient::new(&rt)?,
+        client: IkClient::new(rt)?,
         timeout: Duration::from_secs_f64(args.ik_timeout_ms.max(0.0) * 1e-3),
     };
 
@@ -183,7 +177,7 @@ fn run(args: &cli::Args) -> anyhow::Result<ExitCode> {
         Err(error) => {
             let reason = format!("{error:#}");
             outputs.status(monotonic_ns(), MotionState::Faulted, &reason)?;
-            return hold_after_fault(&mut rt, args, reason);
+            return hold_after_fault(rt, args, reason);
         }
     };
     for task in &tasks {
@@ -225,16 +219,13 @@ fn run(args: &cli::Args) -> anyhow::Result<ExitCode> {
         Ok::<_, anyhow::Error>(())
     })?;
     if exit == Exit::Signal {
-        return Ok(ExitCode::SUCCESS);
+        return Ok(exit);
     }
     match fault {
-        Some(reason) => hold_after_fault(&mut rt, args, reason),
-        None => {
-            // Finished without ending the graph: hold (the rig keeps the last setpoint) until
-            // stopped.
-            while rt.sleep(IDLE_PERIOD) {}
-            Ok(ExitCode::SUCCESS)
-        }
+        Some(reason) => hold_after_fault(rt, args, reason),
+        // Finished without ending the graph: hold (the rig keeps the last setpoint) until
+        // stopped.
+        None => Ok(rt.idle()),
     }
 }
 
@@ -244,21 +235,13 @@ fn hold_after_fault(
     rt: &mut NodeRuntime,
     args: &cli::Args,
     reason: String,
-) -> anyhow::Result<ExitCode> {
+) -> anyhow::Result<Exit> {
     if !args.exit_on_fault {
-        rt.ready();
-        while rt.sleep(IDLE_PERIOD) {}
+        rt.idle();
     }
     Err(anyhow::anyhow!("faulted: {reason}"))
 }
 
 fn main() -> ExitCode {
-    let args = cli::Args::parse();
-    match run(&args).context("sabr-motion") {
-        Ok(code) => code,
-        Err(error) => {
-            eprintln!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("motion", run)
 }

@@ -11,17 +11,16 @@
 mod recorder;
 
 use anyhow::{bail, Context};
-use clap::Parser;
 use recorder::{Continuity, Recorder};
 use sabr_msgs::{services, EncoderSample, PhaseMark, TrackerFrame};
-use sabr_node::{Deadline, NodeRuntime};
+use sabr_node::{Exit, NodeRuntime, StallWatch, StatusTimer};
 use sabr_recording::{FlushPolicy, RecordingError};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 /// Command line of the recorder.
-#[derive(Debug, Parser)]
+#[derive(Debug, clap::Parser)]
 #[command(name = "sabr-recorder", about)]
 struct Args {
     /// Recording directory [default: $SABR_RUN_DIR/recording]. If it already holds files
@@ -47,21 +46,15 @@ struct Args {
 const MCAP_FILE: &str = "session.mcap";
 /// Longest sleep of the loop without data.
 const IDLE: Duration = Duration::from_millis(20);
-/// How often the counters are logged.
-const STATUS_PERIOD: Duration = Duration::from_secs(10);
+/// Index of the encoder stream in [`Watch::streams`].
+const ENCODER_STREAM: usize = 0;
+/// Index of the tracker stream in [`Watch::streams`].
+const TRACKER_STREAM: usize = 1;
 /// Most numbered alternatives tried for the output directory.
 const MAX_DIR_SUFFIX: u32 = 999;
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            eprintln!("sabr-recorder: {error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("recorder", run)
 }
 
 /// The nominal model's `robot.toml` text: the file given (checked by the one `robot.toml`
@@ -100,25 +93,20 @@ fn free_dir(base: &Path) -> anyhow::Result<PathBuf> {
 }
 
 fn output_dir(args: &Args) -> anyhow::Result<PathBuf> {
-    let base = match (&args.out, sabr_node::run_dir()) {
-        (Some(out), _) => out.clone(),
-        (None, Some(run)) => run.join("recording"),
-        (None, None) => bail!(
-            "no output directory: give --out DIR, or run under `sabr launch` (which sets {})",
-            sabr_node::RUN_DIR_ENV
-        ),
-    };
-    free_dir(&base)
+    free_dir(&sabr_node::in_run_dir(
+        args.out.as_deref(),
+        "recording",
+        "--out",
+    )?)
 }
 
-fn run(args: &Args) -> anyhow::Result<()> {
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     if args.flush_ms == 0 {
         bail!("--flush-ms must be at least 1 ms");
     }
     let toml = robot_toml(args.robot_toml.as_deref())?;
     let dir = output_dir(args)?;
     let flush_every = Duration::from_millis(args.flush_ms);
-    let mut rt = NodeRuntime::start("recorder")?;
     let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
     let frames = rt.subscriber::<TrackerFrame>(services::TRACKER_FRAMES)?;
     let motion_phases = rt.subscriber::<PhaseMark>(services::MOTION_PHASES)?;
@@ -137,11 +125,9 @@ fn run(args: &Args) -> anyhow::Result<()> {
 
     let stall = Duration::from_millis(args.stall_ms.max(1));
     let mut watch = Watch {
-        encoders: Deadline::new(stall),
-        tracker: Deadline::new(stall),
-        stalled: [false; 2],
+        streams: StallWatch::new(["encoder", "tracker"], stall),
         last_flush: Instant::now(),
-        last_status: Instant::now(),
+        status: StatusTimer::new(),
     };
     let inputs: [&dyn sabr_node::Waitable; 4] = [&encoders, &frames, &motion_phases, &rig_phases];
     let looped = rt.run_on_data(&inputs, IDLE, |_ctx| {
@@ -162,11 +148,11 @@ fn run(args: &Args) -> anyhow::Result<()> {
             subscriber.drain(|mark| keep(recorder.phase(&mark)))?;
         }
         frames.drain(|frame| {
-            watch.tracker.feed();
+            watch.streams.feed(TRACKER_STREAM);
             keep(recorder.frame(&frame));
         })?;
         encoders.drain(|sample| {
-            watch.encoders.feed();
+            watch.streams.feed(ENCODER_STREAM);
             keep(
                 recorder
                     .encoder(&sample)
@@ -209,39 +195,20 @@ fn run(args: &Args) -> anyhow::Result<()> {
         ?exit,
         "recording finished"
     );
-    Ok(())
+    Ok(exit)
 }
 
 /// Stream deadlines, periodic flush and status line.
 struct Watch {
-    encoders: Deadline,
-    tracker: Deadline,
-    stalled: [bool; 2],
+    streams: StallWatch<2>,
     last_flush: Instant,
-    last_status: Instant,
+    status: StatusTimer,
 }
 
 impl Watch {
     fn check(&mut self, recorder: &Recorder) {
-        for ((deadline, stalled), stream) in [&self.encoders, &self.tracker]
-            .into_iter()
-            .zip(self.stalled.iter_mut())
-            .zip(["encoder samples", "tracker frames"])
-        {
-            if deadline.expired() != *stalled {
-                *stalled = deadline.expired();
-                if *stalled {
-                    tracing::warn!(
-                        silent_ms = deadline.silence().as_millis() as u64,
-                        "no {stream}"
-                    );
-                } else {
-                    tracing::info!("{stream} flowing again");
-                }
-            }
-        }
-        if self.last_status.elapsed() >= STATUS_PERIOD {
-            self.last_status = Instant::now();
+        self.streams.check();
+        if self.status.due() {
             let stats = recorder.stats();
             tracing::info!(
                 encoder_rows = stats.encoder_rows,

@@ -25,11 +25,10 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{bail, Context};
-use clap::Parser;
 use sabr_msgs::{
     services, CounterLatch, FixedString, MotionStatus, MotorSetpoint, PhaseMark, RigTruth,
 };
-use sabr_node::{monotonic_ns, Exit, NodeRuntime, Publisher, Subscriber};
+use sabr_node::{monotonic_ns, Exit, NodeRuntime, Publisher, StatusTimer, Subscriber};
 use sabr_sim::{Session, SimConfig, SimEffect};
 
 use autoplay::{Autoplay, StartGate};
@@ -42,11 +41,9 @@ use tracker_port::{sim_frame, SharedFrames, TrackerPort};
 const FINISH_TAIL_NS: i64 = 1_000_000_000;
 /// Longest wait for the first tracker frame to arrive before readiness.
 const FIRST_FRAME_TIMEOUT: Duration = Duration::from_secs(5);
-/// Period of the status line in the log.
-const STATUS_PERIOD_NS: i64 = 10_000_000_000;
 
 /// Command line of the simulated rig.
-#[derive(Debug, Parser)]
+#[derive(Debug, clap::Parser)]
 #[command(name = "sabr-rig", about)]
 struct Args {
     /// Seed of the true robot, the plan and the sensor noise (as `sabr sim record --seed`).
@@ -100,18 +97,10 @@ fn parse_effect(spec: &str) -> Result<SimEffect, sabr_sim::EffectSpecError> {
 }
 
 fn main() -> ExitCode {
-    sabr_node::init_tracing();
-    let args = Args::parse();
-    match run(&args) {
-        Ok(Exit::Signal | Exit::Done | Exit::Stopped) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("rig", run)
 }
 
-fn run(args: &Args) -> anyhow::Result<Exit> {
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     if !(args.counter_rate_hz.is_finite() && (1000.0..=20_000.0).contains(&args.counter_rate_hz)) {
         bail!(
             "--counter-rate-hz {}: must be between 1000 and 20000",
@@ -121,11 +110,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
     if !(args.autoplay_delay_s.is_finite() && args.autoplay_delay_s >= 0.0) {
         bail!("--autoplay-delay-s {}: must be ≥ 0", args.autoplay_delay_s);
     }
-    let link = match (&args.pty_link, sabr_node::run_dir()) {
-        (Some(link), _) => link.clone(),
-        (None, Some(run_dir)) => run_dir.join("polaris-tty"),
-        (None, None) => bail!("no --pty-link given and SABR_RUN_DIR is unset"),
-    };
+    let link = sabr_node::in_run_dir(args.pty_link.as_deref(), "polaris-tty", "--pty-link")?;
     let mut config = SimConfig::new(args.seed);
     config.duration_scale = args.duration_scale;
     config.effects = args.effects.clone();
@@ -134,7 +119,6 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
         .map_err(anyhow::Error::msg)
         .context("--servo-tau-ms / --servo-max-speed")?;
 
-    let mut rt = NodeRuntime::start("rig")?;
     let mode = if args.autoplay {
         let gate = StartGate::new(
             rt.domain(),
@@ -153,7 +137,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
         "NDI tracker served"
     );
     let mut live = Live {
-        ports: Ports::open(&rt)?,
+        ports: Ports::open(rt)?,
         sim,
         origin_ns: monotonic_ns(),
         mode,
@@ -161,7 +145,7 @@ fn run(args: &Args) -> anyhow::Result<Exit> {
         tip_from_motion: false,
         frames,
         counts: Counters::default(),
-        next_status_ns: STATUS_PERIOD_NS,
+        status: StatusTimer::new(),
         plan_over_logged: false,
     };
     tracing::info!(
@@ -282,7 +266,7 @@ struct Live {
     tip_from_motion: bool,
     frames: SharedFrames,
     counts: Counters,
-    next_status_ns: i64,
+    status: StatusTimer,
     plan_over_logged: bool,
 }
 
@@ -409,8 +393,7 @@ impl Live {
     }
 
     fn log_status(&mut self, t: i64) {
-        if t >= self.next_status_ns {
-            self.next_status_ns += STATUS_PERIOD_NS;
+        if self.status.due() {
             tracing::info!(
                 robot_s = (t as f64 * 1e-9).round(),
                 counts = ?self.sim.counts(),

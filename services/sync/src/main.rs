@@ -5,18 +5,17 @@
 //! documentation for the method.
 
 use anyhow::{bail, Context};
-use clap::Parser;
 use sabr_msgs::{services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame};
-use sabr_node::{monotonic_ns, Deadline, NodeRuntime};
+use sabr_node::{monotonic_ns, Exit, NodeRuntime, StallWatch, StatusTimer, STATUS_PERIOD};
 use sabr_sync::clock::{ClockConfig, ClockEstimate};
 use sabr_sync::encoder_buffer::Pushed;
 use sabr_sync::latency::{self, LatencySetting, ParameterSet};
 use sabr_sync::matcher::{MatchStats, Matcher, MatcherConfig, Unmatched};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Command line of the sync process.
-#[derive(Debug, Parser)]
+#[derive(Debug, clap::Parser)]
 #[command(name = "sabr-sync", about)]
 struct Args {
     /// Tracker latency, ms: the frame clock line (a robust fit of arrival time against frame
@@ -51,21 +50,15 @@ struct Args {
 
 /// Encoder samples per second assumed when sizing the buffer.
 const ENCODER_RATE_HZ: f64 = 1000.0;
-/// How often the counters are logged.
-const STATUS_PERIOD: Duration = Duration::from_secs(10);
+/// Index of the encoder stream in [`Watch::streams`].
+const ENCODER_STREAM: usize = 0;
+/// Index of the tracker stream in [`Watch::streams`].
+const TRACKER_STREAM: usize = 1;
 /// Longest sleep of the loop without data (retries waiting frames, checks deadlines).
 const IDLE: Duration = Duration::from_millis(10);
 
 fn main() -> std::process::ExitCode {
-    let args = Args::parse();
-    match run(&args) {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            eprintln!("sabr-sync: {error:#}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("sync", run)
 }
 
 fn positive_ms(name: &str, ms: f64) -> anyhow::Result<i64> {
@@ -103,7 +96,7 @@ fn matcher_config(args: &Args) -> anyhow::Result<MatcherConfig> {
     })
 }
 
-fn run(args: &Args) -> anyhow::Result<()> {
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     let config = matcher_config(args)?;
     let stall = Duration::from_nanos(positive_ms("stall-ms", args.stall_ms)? as u64);
     let configured = args
@@ -125,7 +118,6 @@ fn run(args: &Args) -> anyhow::Result<()> {
     }
     let mut matcher = Matcher::new(config, counts_per_rev);
 
-    let mut rt = NodeRuntime::start("sync")?;
     let encoders = rt.subscriber::<EncoderSample>(services::ENCODER_SAMPLES)?;
     // Frames that arrived before this point are the tracker publisher's history: they only
     // teach the clock (a restarted sync locks at once instead of after seconds of new frames).
@@ -158,7 +150,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
 
     let mut watch = Watch::new(stall);
     let mut history_frames = 0_usize;
-    rt.run_on_data(&[&encoders, &frames, &announcements], IDLE, |_ctx| {
+    let exit = rt.run_on_data(&[&encoders, &frames, &announcements], IDLE, |_ctx| {
         announcements.drain(|a| {
             if let Some(set) = load_announced(&a) {
                 matcher.set_counts_per_rev(set.params.joints.counts_per_rev);
@@ -176,7 +168,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
             }
         })?;
         encoders.drain(|sample| {
-            watch.encoders.feed();
+            watch.streams.feed(ENCODER_STREAM);
             match matcher.push_encoder(sample) {
                 Pushed::AfterGap { lost } => tracing::warn!(
                     lost,
@@ -209,7 +201,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 );
                 history_frames = 0;
             }
-            watch.tracker.feed();
+            watch.streams.feed(TRACKER_STREAM);
             let result = matcher.push_frame(frame, setting.current(), now);
             watch.frame_admitted(frame.frame_number, result, matcher.last_clock());
         })?;
@@ -228,7 +220,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     })?;
     let stats = matcher.stats();
     tracing::info!(?stats, "sync stopped");
-    Ok(())
+    Ok(exit)
 }
 
 /// Reads an announced parameter file; a bad one is reported and ignored (the previous
@@ -257,30 +249,24 @@ fn load_announced(announcement: &ParameterSetAnnouncement) -> Option<ParameterSe
 
 /// Stream deadlines, first-occurrence warnings and the periodic status line.
 struct Watch {
-    encoders: Deadline,
-    tracker: Deadline,
-    encoders_stalled: bool,
-    tracker_stalled: bool,
+    streams: StallWatch<2>,
     locked: bool,
     clock: Option<ClockEstimate>,
     warned_drop: bool,
     warned_no_latency: bool,
-    last_status: Instant,
+    status: StatusTimer,
     last_stats: MatchStats,
 }
 
 impl Watch {
     fn new(stall: Duration) -> Self {
         Self {
-            encoders: Deadline::new(stall),
-            tracker: Deadline::new(stall),
-            encoders_stalled: false,
-            tracker_stalled: false,
+            streams: StallWatch::new(["encoder", "tracker"], stall),
             locked: false,
             clock: None,
             warned_drop: false,
             warned_no_latency: false,
-            last_status: Instant::now(),
+            status: StatusTimer::new(),
             last_stats: MatchStats::default(),
         }
     }
@@ -337,23 +323,8 @@ impl Watch {
     }
 
     fn check(&mut self, stats: &MatchStats) {
-        for (deadline, stalled, stream) in [
-            (&self.encoders, &mut self.encoders_stalled, "encoder"),
-            (&self.tracker, &mut self.tracker_stalled, "tracker"),
-        ] {
-            if deadline.expired() && !*stalled {
-                *stalled = true;
-                tracing::warn!(
-                    silent_ms = deadline.silence().as_millis() as u64,
-                    "no {stream} data"
-                );
-            } else if !deadline.expired() && *stalled {
-                *stalled = false;
-                tracing::info!("{stream} data flowing again");
-            }
-        }
-        if self.last_status.elapsed() >= STATUS_PERIOD {
-            self.last_status = Instant::now();
+        self.streams.check();
+        if self.status.due() {
             let last = self.last_stats;
             tracing::info!(
                 frames = stats.frames - last.frames,

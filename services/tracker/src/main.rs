@@ -9,13 +9,14 @@
 
 mod convert;
 
+use std::path::Path;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use anyhow::Context;
-use clap::Parser;
 use sabr_msgs::{services, Tool, TrackerFrame};
 use sabr_ndi::{Baud, DriverConfig, DriverError, NdiDriver};
-use sabr_node::NodeRuntime;
+use sabr_node::{Exit, NodeRuntime, Publisher};
 
 use convert::{tracker_frame, HandleMap};
 
@@ -23,7 +24,7 @@ use convert::{tracker_frame, HandleMap};
 const BAD_REPLIES_LOGGED: u64 = 10;
 
 /// Command line of the tracker process.
-#[derive(Debug, Parser)]
+#[derive(Debug, clap::Parser)]
 #[command(name = "sabr-tracker", about)]
 struct Args {
     /// Serial device of the tracker (e.g. /dev/ttyUSB0, or the rig's device path)
@@ -42,29 +43,18 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    sabr_node::init_tracing();
-    match run(&Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_node::service_main("tracker", run)
 }
 
-fn run(args: &Args) -> anyhow::Result<()> {
-    let port = match (&args.port, sabr_node::run_dir()) {
-        (Some(port), _) => port.clone(),
-        (None, Some(run_dir)) => run_dir.join("polaris-tty").to_string_lossy().into_owned(),
-        (None, None) => anyhow::bail!("no --port given and SABR_RUN_DIR is unset"),
-    };
+fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
+    let port = sabr_node::in_run_dir(args.port.as_deref().map(Path::new), "polaris-tty", "--port")?;
+    let port = port.to_string_lossy().into_owned();
     let baud = Baud::from_bits_per_second(args.baud).with_context(|| {
         format!(
             "--baud {}: not a speed the NDI COMM command offers",
             args.baud
         )
     })?;
-    let mut rt = NodeRuntime::start("tracker")?;
     let out = rt.publisher::<TrackerFrame>(services::TRACKER_FRAMES)?;
     let config = DriverConfig {
         baud,
@@ -74,45 +64,71 @@ fn run(args: &Args) -> anyhow::Result<()> {
         NdiDriver::connect(config).with_context(|| format!("starting the tracker on {port}"))?;
     log_start(&driver, &args.handles);
 
-    let mut published = 0u64;
-    let mut bad_replies = 0u64;
-    while args.frames == 0 || published < args.frames {
+    let mut tracking = Tracking::default();
+    // Ready only once the device gives frames.
+    while tracking.published == 0 {
         if !rt.keep_running() {
-            break;
+            return Ok(Exit::Signal);
         }
+        tracking.step(&mut driver, &out, &args.handles)?;
+    }
+    // Paced by the device: `next_frame` returns when the next frame is there.
+    let exit = rt.run_loop(Duration::ZERO, |ctx| {
+        if args.frames != 0 && tracking.published >= args.frames {
+            ctx.stop();
+            return Ok(());
+        }
+        tracking.step(&mut driver, &out, &args.handles)
+    });
+    let exit = match exit {
+        Err(_) if sabr_node::termination_requested() => {
+            // Stopping anyway (e.g. the whole graph at once): the device went first.
+            tracing::info!(?tracking, "stop requested; tracker gone");
+            return Ok(Exit::Signal);
+        }
+        exit => exit?,
+    };
+    let stats = driver.stats();
+    driver.stop().context("stopping the tracker (TSTOP)")?;
+    tracing::info!(?tracking, ?stats, "tracking stopped");
+    Ok(exit)
+}
+
+/// Frames published and bad replies skipped so far.
+#[derive(Debug, Default)]
+struct Tracking {
+    published: u64,
+    bad_replies: u64,
+}
+
+impl Tracking {
+    /// Waits for the next frame and publishes it; a bad reply is counted and skipped, a dead
+    /// tracker is an error.
+    fn step(
+        &mut self,
+        driver: &mut NdiDriver,
+        out: &Publisher<TrackerFrame>,
+        handles: &HandleMap,
+    ) -> anyhow::Result<()> {
         match driver.next_frame() {
             Ok(stamped) => {
-                published += 1;
-                out.send(tracker_frame(published, &stamped, &args.handles))?;
-                if published == 1 {
-                    rt.ready();
-                }
+                self.published += 1;
+                out.send(tracker_frame(self.published, &stamped, handles))?;
             }
             Err(error @ (DriverError::Reply { .. } | DriverError::Device { .. })) => {
-                bad_replies += 1;
+                self.bad_replies += 1;
+                let bad_replies = self.bad_replies;
                 if bad_replies <= BAD_REPLIES_LOGGED || bad_replies.is_multiple_of(100) {
                     tracing::warn!(bad_replies, "skipping a bad tracker reply: {error}");
                 }
             }
-            Err(error) if !rt.keep_running() => {
-                // Stopping anyway (e.g. the whole graph at once): the device went first.
-                tracing::info!(
-                    published,
-                    bad_replies,
-                    "stop requested; tracker gone: {error}"
-                );
-                return Ok(());
-            }
             Err(error) => {
-                tracing::info!(published, bad_replies, stats = ?driver.stats(), "tracker lost");
+                tracing::info!(tracking = ?self, stats = ?driver.stats(), "tracker lost");
                 return Err(error).context("the tracker is dead");
             }
         }
+        Ok(())
     }
-    let stats = driver.stats();
-    driver.stop().context("stopping the tracker (TSTOP)")?;
-    tracing::info!(published, bad_replies, ?stats, "tracking stopped");
-    Ok(())
 }
 
 fn log_start(driver: &NdiDriver, map: &HandleMap) {

@@ -1,10 +1,8 @@
 //! [`IkClient`]: one request at a time to the IK server, with a timeout.
 
 use sabr_msgs::{services, IkRequest, IkResponse};
-use sabr_node::iceoryx2::port::notifier::Notifier;
-use sabr_node::iceoryx2::prelude::ipc;
-use sabr_node::{Client, NodeError, NodeRuntime};
-use std::time::{Duration, Instant};
+use sabr_node::{DoorbellClient, NodeError, NodeRuntime};
+use std::time::Duration;
 
 /// Why a request got no response.
 #[derive(Debug, thiserror::Error)]
@@ -51,74 +49,40 @@ pub enum IkClientError {
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 pub struct IkClient {
-    client: Client<IkRequest, IkResponse>,
-    wake_server: Notifier<ipc::Service>,
+    client: DoorbellClient<IkRequest, IkResponse>,
     next_id: u64,
 }
 
 impl IkClient {
-    /// Opens the IK service (creating it if no server runs yet) and a notifier that wakes
-    /// the server.
+    /// Opens the IK service (creating it if no server runs yet).
     pub fn new(rt: &NodeRuntime) -> Result<Self, NodeError> {
         Ok(Self {
             client: rt.client::<IkRequest, IkResponse>(services::IK_SOLVE)?,
-            wake_server: rt.notifier(services::IK_SOLVE)?,
             next_id: 1,
         })
     }
 
-    /// Sends `request` (its `id` is replaced by the client's next id), wakes the server and
-    /// waits up to `timeout` for the response. The response's status may still be an error
-    /// (unreachable or invalid target, no parameters).
+    /// Sends `request` (its `id` is replaced by the client's next id), rings the server's
+    /// doorbell and sleeps on this process's doorbell up to `timeout` for the response. The
+    /// response's status may still be an error (unreachable or invalid target, no parameters).
     pub fn solve(
         &mut self,
         mut request: IkRequest,
         timeout: Duration,
     ) -> Result<IkResponse, IkClientError> {
-        let start = Instant::now();
         request.id = self.next_id;
         self.next_id += 1;
         let pending = self
             .client
-            .send_copy(request)
-            .map_err(|e| port_error("send a request", e))?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(IkClientError::NoServer);
+            .send(request)?
+            .ok_or(IkClientError::NoServer)?;
+        match self.client.receive(&pending, timeout)? {
+            Some(response) => Ok(response),
+            None if !pending.is_connected() => Err(IkClientError::ServerGone { id: request.id }),
+            None => Err(IkClientError::Timeout {
+                id: request.id,
+                timeout,
+            }),
         }
-        self.wake_server
-            .notify()
-            .map_err(|e| port_error("wake the server", e))?;
-        let receive = || -> Result<Option<IkResponse>, IkClientError> {
-            let response = pending
-                .receive()
-                .map_err(|e| port_error("receive a response", e))?;
-            Ok(response.map(|response| *response.payload()))
-        };
-        // Poll, yielding the CPU between polls: on a busy host the server may need this
-        // core to answer (a pure spin made the p99 ten times longer on a loaded host).
-        loop {
-            if let Some(response) = receive()? {
-                return Ok(response);
-            }
-            // The server drops the request right after answering: look once more.
-            if !pending.is_connected() {
-                return receive()?.ok_or(IkClientError::ServerGone { id: request.id });
-            }
-            if start.elapsed() >= timeout {
-                return Err(IkClientError::Timeout {
-                    id: request.id,
-                    timeout,
-                });
-            }
-            std::thread::yield_now();
-        }
-    }
-}
-
-fn port_error(operation: &'static str, error: impl std::fmt::Debug) -> NodeError {
-    NodeError::Port {
-        service: services::IK_SOLVE.to_owned(),
-        operation,
-        reason: format!("{error:?}"),
     }
 }

@@ -9,15 +9,8 @@
 //!   [`services::IK_SOLVE`]; it reloads the parameters when the calibrator announces a new set
 //!   on [`services::CALIBRATOR_PARAMETERS`] and keeps the previous set when the new file is
 //!   corrupt.
-//! - [`IkClient`]: sends a request, wakes the server and waits for the answer.
-//!
-//! ## Wake-up convention
-//!
-//! iceoryx2 request-response has no wake-up of its own, so a client wakes the sleeping server
-//! through the event service of the same name: after sending a request it notifies
-//! `NodeRuntime::notifier(services::IK_SOLVE)`. [`IkClient`] does this; a hand-made client
-//! (`NodeRuntime::client::<IkRequest, IkResponse>(services::IK_SOLVE)`) must do it too, or its
-//! request waits for the server's next periodic poll ([`server::POLL_PERIOD`]).
+//! - [`IkClient`]: sends a request, rings the server's doorbell and sleeps on its own until
+//!   the answer rings it back (the graph's doorbell transport, `sabr_node::Doorbell`).
 //!
 //! [`IkRequest`]: sabr_msgs::IkRequest
 //! [`services::IK_SOLVE`]: sabr_msgs::services::IK_SOLVE

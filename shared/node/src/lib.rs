@@ -42,6 +42,7 @@ mod message;
 mod observer;
 mod ports;
 mod runtime;
+mod service;
 mod time;
 mod transport;
 
@@ -51,11 +52,12 @@ pub use doorbell::Doorbell;
 pub use doorbell_rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
 pub use message::Message;
 pub use observer::{domain_files, release_domain, GraphObserver};
-pub use ports::{Client, Publisher, Server, Subscriber};
+pub use ports::{Publisher, Subscriber};
 pub use runtime::{
-    run_dir, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD, NODE_NAME_ENV,
+    run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD, NODE_NAME_ENV,
     RUN_DIR_ENV,
 };
+pub use service::{in_run_dir, service_main, StallWatch, StatusTimer, STATUS_PERIOD};
 pub use time::monotonic_ns;
 pub use transport::{Transport, Waitable};
 

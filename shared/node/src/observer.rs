@@ -3,20 +3,21 @@
 use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
 use crate::{Domain, NodeError, Transport};
 use iceoryx2::node::Node;
-use iceoryx2::prelude::{ipc, NodeBuilder};
+use crate::Doorbell;
+use iceoryx2::prelude::NodeBuilder;
 use sabr_msgs::{services, Lifecycle};
 use std::path::PathBuf;
 use std::time::Duration;
 
 /// An iceoryx2 node that receives every node's lifecycle announcements of a domain and can
 /// clean up after dead nodes. It does not announce itself. `S` is the graph's transport.
-pub struct GraphObserver<S: Transport = ipc::Service> {
+pub struct GraphObserver<S: Transport = Doorbell> {
     lifecycle: iceoryx2::port::subscriber::Subscriber<S, Lifecycle, ()>,
     node: Node<S>,
 }
 
-impl GraphObserver<ipc::Service> {
-    /// Joins `domain` (creating the lifecycle service) and removes stale resources of dead
+impl GraphObserver<Doorbell> {
+    /// Joins the graph of `domain` (on the graph's transport, [`Doorbell`]) (creating the lifecycle service) and removes stale resources of dead
     /// nodes. Catches SIGINT/SIGTERM: see [`GraphObserver::wait`].
     pub fn new(domain: &Domain) -> Result<Self, NodeError> {
         Self::join(domain)
@@ -118,7 +119,7 @@ pub fn domain_files(domain: &Domain) -> Vec<PathBuf> {
 pub fn release_domain(domain: &Domain) -> Vec<PathBuf> {
     let config = domain.iceoryx_config();
     let mut nodes = 0usize;
-    let listed = Node::<ipc::Service>::list(&config, |_| {
+    let listed = Node::<Doorbell>::list(&config, |_| {
         nodes += 1;
         iceoryx2::prelude::CallbackProgression::Continue
     });

@@ -4,17 +4,13 @@
 use crate::message::Message;
 use crate::transport::{Transport, Waitable};
 use crate::NodeError;
-use iceoryx2::prelude::ipc;
+use crate::Doorbell;
 use iceoryx2::service::port_factory::publish_subscribe;
 use std::time::{Duration, Instant};
 
-/// The raw iceoryx2 client of a request-response service.
-pub type Client<Req, Resp, S = ipc::Service> = iceoryx2::port::client::Client<S, Req, (), Resp, ()>;
-/// The raw iceoryx2 server of a request-response service.
-pub type Server<Req, Resp, S = ipc::Service> = iceoryx2::port::server::Server<S, Req, (), Resp, ()>;
 
 /// Publishes `T` on a service and wakes every [`Subscriber`] of it that is waiting.
-pub struct Publisher<T: Message, S: Transport = ipc::Service> {
+pub struct Publisher<T: Message, S: Transport = Doorbell> {
     port: iceoryx2::port::publisher::Publisher<S, T, ()>,
     wake: S::Wake,
     factory: publish_subscribe::PortFactory<S, T, ()>,
@@ -51,7 +47,7 @@ impl<T: Message, S: Transport> Publisher<T, S> {
 }
 
 /// Receives `T` from a service; can block until data arrives, with a timeout.
-pub struct Subscriber<T: Message, S: Transport = ipc::Service> {
+pub struct Subscriber<T: Message, S: Transport = Doorbell> {
     port: iceoryx2::port::subscriber::Subscriber<S, T, ()>,
     inbox: S::Inbox,
     service: String,

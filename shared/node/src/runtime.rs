@@ -1,14 +1,13 @@
 //! [`NodeRuntime`]: the iceoryx2 node of one process, its lifecycle and its main loops.
 
-use crate::events::{listener_on, notifier_on, service_name};
+use crate::events::service_name;
 use crate::message::Message;
-use crate::ports::{Client, Publisher, Server, Subscriber};
+use crate::ports::{Publisher, Subscriber};
 use crate::transport::{Transport, Waitable};
 use crate::{monotonic_ns, Domain, NodeError};
 use iceoryx2::node::Node;
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::{ipc, NodeBuilder, NodeName};
+use crate::Doorbell;
+use iceoryx2::prelude::{NodeBuilder, NodeName};
 use iceoryx2_bb_posix::signal::SignalHandler;
 use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
 use std::path::PathBuf;
@@ -32,6 +31,12 @@ pub(crate) const LIFECYCLE_BUFFER: usize = 256;
 /// write; `None` when the process was started by hand without it.
 pub fn run_dir() -> Option<PathBuf> {
     std::env::var_os(RUN_DIR_ENV).map(PathBuf::from)
+}
+
+/// True once SIGINT or SIGTERM arrived (what [`NodeRuntime::keep_running`] looks at), for
+/// code that has no runtime at hand, e.g. to tell a device lost in a stop from a failure.
+pub fn termination_requested() -> bool {
+    SignalHandler::termination_requested()
 }
 
 /// Why a main loop returned.
@@ -100,8 +105,8 @@ impl LoopCtx {
 
 /// The runtime of one SABR process: iceoryx2 node in the graph's domain, typed ports,
 /// lifecycle announcements (readiness, heartbeat, stopping, done) and signal-aware loops, on
-/// transport `S` (stock iceoryx2 events by default, or the futex [`crate::Doorbell`]: every
-/// process of a domain uses the same).
+/// transport `S` (the graph's futex [`Doorbell`] by default, or stock iceoryx2 events with
+/// `ipc::Service`: every process of a domain uses the same).
 ///
 /// ```no_run
 /// use sabr_node::NodeRuntime;
@@ -119,7 +124,7 @@ impl LoopCtx {
 ///     Ok(())
 /// }
 /// ```
-pub struct NodeRuntime<S: Transport = ipc::Service> {
+pub struct NodeRuntime<S: Transport = Doorbell> {
     // Ports before the node they were made by: fields drop in order.
     lifecycle: iceoryx2::port::publisher::Publisher<S, Lifecycle, ()>,
     inbound: S::Inbound,
@@ -133,10 +138,11 @@ pub struct NodeRuntime<S: Transport = ipc::Service> {
     stop_requested: bool,
 }
 
-impl NodeRuntime<ipc::Service> {
-    /// Starts the runtime of a service process: logging to stderr, the node name from
-    /// [`NODE_NAME_ENV`] (else `default_name`), the domain from [`crate::DOMAIN_ENV`], stale
-    /// resources of dead nodes removed, SIGINT/SIGTERM caught, `Starting` announced.
+impl NodeRuntime<Doorbell> {
+    /// Starts the runtime of a service process on the graph's transport ([`Doorbell`]):
+    /// logging to stderr, the node name from [`NODE_NAME_ENV`] (else `default_name`), the
+    /// domain from [`crate::DOMAIN_ENV`], stale resources of dead nodes removed, SIGINT/SIGTERM
+    /// caught, `Starting` announced.
     pub fn start(default_name: &str) -> Result<Self, NodeError> {
         Self::start_on(default_name)
     }
@@ -145,47 +151,6 @@ impl NodeRuntime<ipc::Service> {
     /// (and leaving logging set-up to the caller).
     pub fn with_domain(name: &str, domain: Domain) -> Result<Self, NodeError> {
         Self::in_domain(name, domain)
-    }
-
-    /// A notifier on the event service named `service` (publishers use the same name to wake
-    /// their subscribers; a request-response client may use it to wake its server).
-    pub fn notifier(&self, service: &str) -> Result<Notifier<ipc::Service>, NodeError> {
-        notifier_on(&self.node, service)
-    }
-
-    /// A listener on the event service named `service`.
-    pub fn listener(&self, service: &str) -> Result<Listener<ipc::Service>, NodeError> {
-        listener_on(&self.node, service)
-    }
-
-    /// A client of a request-response service (e.g. `services::IK_SOLVE`).
-    pub fn client<Req: Message, Resp: Message>(
-        &self,
-        service: &str,
-    ) -> Result<Client<Req, Resp>, NodeError> {
-        self.node
-            .service_builder(&service_name(service)?)
-            .request_response::<Req, Resp>()
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open service", e))?
-            .client_builder()
-            .create()
-            .map_err(|e| NodeError::port(service, "create client", e))
-    }
-
-    /// The server of a request-response service.
-    pub fn server<Req: Message, Resp: Message>(
-        &self,
-        service: &str,
-    ) -> Result<Server<Req, Resp>, NodeError> {
-        self.node
-            .service_builder(&service_name(service)?)
-            .request_response::<Req, Resp>()
-            .open_or_create()
-            .map_err(|e| NodeError::port(service, "open service", e))?
-            .server_builder()
-            .create()
-            .map_err(|e| NodeError::port(service, "create server", e))
     }
 }
 
@@ -338,7 +303,7 @@ impl<S: Transport> NodeRuntime<S> {
     pub fn keep_running(&mut self) -> bool {
         // The flag iceoryx2's signal handler sets, read without a system call (a wake-up of
         // the doorbell transport costs only a few).
-        if !self.stop_requested && SignalHandler::termination_requested() {
+        if !self.stop_requested && termination_requested() {
             self.stop_requested = true;
         }
         self.heartbeat_if_due();
@@ -357,6 +322,7 @@ impl<S: Transport> NodeRuntime<S> {
 
     /// Calls `body` every `period` (drift-free schedule; when the body overruns, missed
     /// periods are skipped, not bunched) until a signal arrives or the body stops the loop.
+    /// A zero period calls it back to back: a body paced by a device it waits for.
     pub fn run_loop<E>(
         &mut self,
         period: Duration,
@@ -381,11 +347,23 @@ impl<S: Transport> NodeRuntime<S> {
             }
             next += period;
             let behind = Instant::now().saturating_duration_since(next);
-            if behind >= period {
+            if period.is_zero() {
+                next = Instant::now();
+            } else if behind >= period {
                 let skipped = (behind.as_nanos() / period.as_nanos().max(1)) as u32;
                 ctx.missed += u64::from(skipped);
                 next += period * skipped;
             }
+        }
+    }
+
+    /// Does nothing but stay in the graph (ready, heartbeat) until a signal arrives: a node
+    /// whose job ended but which must not leave, e.g. holding the robot's last setpoint.
+    pub fn idle(&mut self) -> Exit {
+        let idle = self.run_loop(HEARTBEAT_PERIOD, |_ctx| Ok::<_, std::convert::Infallible>(()));
+        match idle {
+            Ok(exit) => exit,
+            Err(never) => match never {},
         }
     }
 

@@ -32,7 +32,7 @@ impl Transport for Doorbell {}
 
 /// An input of a main loop ([`crate::NodeRuntime::run_on_data`]): a subscriber of any message
 /// type (or, on the doorbell transport, a server), for waiting on several at once.
-pub trait Waitable<S: Transport = ipc::Service> {
+pub trait Waitable<S: Transport = Doorbell> {
     /// How the input is woken: its event listener, or its event id of the doorbell.
     #[doc(hidden)]
     #[allow(private_interfaces)]

@@ -31,7 +31,7 @@ use sabr_msgs::{
     services, EncoderSample, FixedString, MotionState, MotionStatus, MotorSetpoint,
     ParameterSetAnnouncement, PhaseMark, RigTruth, TrackerFrame,
 };
-use sabr_node::{monotonic_ns, LoopCtx, NodeRuntime, Publisher, Subscriber, Waitable};
+use sabr_node::{monotonic_ns, Exit, LoopCtx, NodeRuntime, Publisher, Subscriber, Waitable};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -83,7 +83,7 @@ pub struct Args {
 }
 
 /// Runs the live calibrator until its job is done or it is stopped.
-pub fn run(args: &Args) -> anyhow::Result<()> {
+pub fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
     if !(args.tail_timeout_s.is_finite() && args.tail_timeout_s > 0.0) {
         bail!(
             "--tail-timeout-s {}: must be a positive number",
@@ -98,8 +98,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     }
     let robot_toml = robot_toml(args.robot_toml.as_deref())?;
     let out = output_dir(args)?;
-    let mut rt = NodeRuntime::start("calibrator")?;
-    let ports = Ports::open(&rt, args.line_test)?;
+    let ports = Ports::open(rt, args.line_test)?;
     let mut calibrator = Calibrator {
         args,
         out,
@@ -111,7 +110,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let inputs = ports.inputs();
     let exit = rt.run_on_data(&inputs, IDLE, |ctx| calibrator.step(ctx, &ports))?;
     tracing::info!(?exit, "calibrator leaving");
-    Ok(())
+    Ok(exit)
 }
 
 /// The nominal model: the file given (checked), else the built-in one (as the recorder).
@@ -126,14 +125,7 @@ fn robot_toml(path: Option<&Path>) -> anyhow::Result<String> {
 }
 
 fn output_dir(args: &Args) -> anyhow::Result<PathBuf> {
-    let dir = match (&args.out, sabr_node::run_dir()) {
-        (Some(out), _) => out.clone(),
-        (None, Some(run)) => run.join("calibration"),
-        (None, None) => bail!(
-            "no output directory: give --out DIR, or run under `sabr launch` (which sets {})",
-            sabr_node::RUN_DIR_ENV
-        ),
-    };
+    let dir = sabr_node::in_run_dir(args.out.as_deref(), "calibration", "--out")?;
     std::fs::create_dir_all(&dir)
         .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
     dir.canonicalize()
