@@ -29,7 +29,7 @@ use sabr_recording::poses::{
     Measured, PoseRow, PosesRecording, PosesRobot, Target, TargetMeasurement,
 };
 
-use crate::out_dir::create_out_dir;
+use sabr_launcher::create_out_dir;
 
 /// The UR10 description the importer copies into the recording unless `--urdf` is given.
 const UR10_URDF: &str = include_str!("../../shared/model/robots/ur10.urdf");

@@ -1,5 +1,5 @@
 //! `sabr launch` as a binary of the test package, so `cargo test -p sabr-integration-tests`
-//! builds it next to `sabr-test-node` (same code as `sabr launch`: `sabr::launcher::run`).
+//! builds it next to `sabr-test-node` (same code as `sabr launch`: `sabr_launcher::run`).
 
 use clap::Parser;
 use std::process::ExitCode;
@@ -9,11 +9,11 @@ use std::process::ExitCode;
 #[command(name = "sabr-test-launch")]
 struct Cli {
     #[command(flatten)]
-    args: sabr::launcher::LaunchArgs,
+    args: sabr_launcher::LaunchArgs,
 }
 
 fn main() -> ExitCode {
-    match sabr::launcher::run(&Cli::parse().args) {
+    match sabr_launcher::run(&Cli::parse().args) {
         Ok(code) => code,
         Err(error) => {
             eprintln!("sabr: {error:#}");

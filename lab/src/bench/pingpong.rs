@@ -1,5 +1,5 @@
-//! The measuring side of a ping-pong baseline: spawns `sabr bench --role pong ...` as a
-//! separate process, times round trips, then watches the waiting pong's CPU use.
+//! The measuring side of a ping-pong baseline: spawns `sabr-pong` (beside this executable) as
+//! a separate process, times round trips, then watches the waiting pong's CPU use.
 
 use super::cpu::{measure_cpu_share, CpuShare};
 use super::iox::{IoxEnd, Wait};
@@ -170,6 +170,19 @@ fn measure(
     })
 }
 
+/// The `sabr-pong` executable beside the running one (cargo builds them side by side).
+fn pong_executable() -> anyhow::Result<std::path::PathBuf> {
+    let exe = std::env::current_exe().context("cannot locate the running executable")?;
+    let pong = exe.with_file_name("sabr-pong");
+    if !pong.is_file() {
+        bail!(
+            "{} not found: build it with `cargo build --release -p sabr-lab`",
+            pong.display()
+        );
+    }
+    Ok(pong)
+}
+
 /// A spawned pong process; killed if still running when dropped (on an error path).
 struct PongProcess {
     child: Child,
@@ -182,16 +195,16 @@ impl PongProcess {
         plan: &Plan,
         extra: &[&str],
     ) -> anyhow::Result<Self> {
-        let exe = std::env::current_exe().context("cannot locate the sabr executable")?;
+        let exe = pong_executable()?;
         let child = Command::new(&exe)
-            .args(["bench", "--role", "pong", "--transport", transport.name()])
+            .args(["--transport", transport.name()])
             .args(["--payload", payload.name()])
             .args(["--count", &plan.pong_count().to_string()])
             .args(extra)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .spawn()
-            .with_context(|| format!("cannot start {} bench --role pong", exe.display()))?;
+            .with_context(|| format!("cannot start {}", exe.display()))?;
         Ok(Self { child })
     }
 

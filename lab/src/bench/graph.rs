@@ -1,5 +1,5 @@
 //! A live graph under measurement: a launch file written by the bench, run by `sabr launch`
-//! (this executable) as a child process in an iceoryx2 domain of its own, and the node
+//! (the `sabr` beside the node executables) as a child process in an iceoryx2 domain of its own, and the node
 //! processes it started, learnt from their lifecycle announcements.
 
 use super::cpu::CpuShare;
@@ -7,7 +7,7 @@ use super::stats::Measurement;
 use anyhow::{bail, Context};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use sabr::launcher::spec;
+use sabr_launcher::spec;
 use sabr_node::msgs::LifecycleState;
 use sabr_node::{Domain, GraphObserver};
 use std::collections::BTreeMap;
@@ -79,7 +79,7 @@ impl LiveGraph {
         let launcher_log = dir.join(format!("{name}-launcher.log"));
         let output = std::fs::File::create(&launcher_log)
             .with_context(|| format!("cannot create {}", launcher_log.display()))?;
-        let exe = std::env::current_exe().context("cannot locate the sabr executable")?;
+        let exe = bin_dir.join("sabr");
         let launcher = Command::new(&exe)
             .arg("launch")
             .arg(&file)

@@ -21,9 +21,9 @@ use anyhow::{bail, Context};
 use launcher_child::LauncherChild;
 use monitor::Monitor;
 use report::{Goals, Outcome, SoakCsv};
-use sabr::launcher::describe;
-use sabr::launcher::spec;
-use sabr::progress::Progress;
+use sabr_launcher::describe;
+use sabr_launcher::spec;
+use sabr_launcher::progress::Progress;
 use sabr_node::Domain;
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -135,9 +135,9 @@ struct Live {
 /// Runs `sabr soak`: success if every goal is met, failure (1) otherwise.
 pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     let plan = Plan::new(args)?;
-    let bin_dir = sabr::launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
+    let bin_dir = sabr_launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
     if args.bin_dir.is_none() {
-        sabr::launcher::build_graph_executables(&args.graph, &bin_dir)?;
+        sabr_launcher::build_graph_executables(&args.graph, &bin_dir)?;
     }
     let graph = spec::load(&args.graph, &bin_dir)?;
     let domain = Domain::new(
@@ -150,7 +150,7 @@ pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     if !stale.is_empty() {
         bail!("domain {domain} is in use (iceoryx2 files {stale:?}); choose another with --domain");
     }
-    let out = crate::out_dir::create_out_dir(args.out.clone(), "soak")?;
+    let out = sabr_launcher::create_out_dir(args.out.clone(), "soak")?;
     let ticks_per_second = crate::procfs::ticks_per_second()?;
     println!(
         "sabr soak: {} — {} nodes, domain {domain}, window {:.0} s, output {}",
@@ -172,9 +172,9 @@ pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
         "--duration".into(),
         format!("{}", backstop.as_secs_f64()).into(),
         "--bin-dir".into(),
-        bin_dir.into(),
+        bin_dir.clone().into(),
     ];
-    let mut launcher = LauncherChild::spawn(&launch_args, &out.join("launcher.log"))?;
+    let mut launcher = LauncherChild::spawn(&bin_dir, &launch_args, &out.join("launcher.log"))?;
     monitor.track("launcher", launcher.pid());
     let mut csv = SoakCsv::create(&out)?;
     let nodes: Vec<String> = graph.nodes.iter().map(|n| n.name.clone()).collect();

@@ -28,7 +28,7 @@
 //! tried before any node starts ([`check_placements`]); the launcher applies it in the child
 //! before the node's executable runs.
 
-use super::placement::{self, Placement, Sched};
+use crate::placement::{self, Placement, Sched};
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;

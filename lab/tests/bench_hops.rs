@@ -13,7 +13,9 @@ use std::process::{Command, Stdio};
 const SAMPLES: u64 = 200;
 /// The quick sensing window, s.
 const WINDOW_S: f64 = 5.0;
-const SERVICES: [&str; 6] = [
+/// The executables the hops need beside `sabr-lab`: the launcher and the graphs' services.
+const SERVICES: [&str; 7] = [
+    "sabr",
     "sabr-rig",
     "sabr-encoders",
     "sabr-tracker",
@@ -50,8 +52,8 @@ fn number(row: &BTreeMap<String, String>, column: &str) -> f64 {
 
 #[test]
 fn quick_hops_measure_the_live_graphs() {
-    let sabr = Path::new(env!("CARGO_BIN_EXE_sabr"));
-    let bin_dir = sabr.parent().unwrap();
+    let lab = Path::new(env!("CARGO_BIN_EXE_sabr-lab"));
+    let bin_dir = lab.parent().unwrap();
     for exec in SERVICES {
         assert!(
             bin_dir.join(exec).is_file(),
@@ -62,7 +64,7 @@ fn quick_hops_measure_the_live_graphs() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("bench");
-    let child = Command::new(sabr)
+    let child = Command::new(lab)
         .args(["bench", "--quick", "--only", "hops"])
         .args(["--samples", &SAMPLES.to_string()])
         .arg("--out")

@@ -307,7 +307,7 @@ mod tests {
     fn launch_file_runs_the_rig_without_autoplay() {
         let bin_dir = tempfile::tempdir().unwrap();
         std::fs::write(bin_dir.path().join("sabr-rig"), "").unwrap();
-        let graph = sabr::launcher::spec::parse(
+        let graph = sabr_launcher::spec::parse(
             Path::new("setpoints.toml"),
             &launch_toml(),
             bin_dir.path(),

@@ -9,7 +9,7 @@ const TRANSPORTS: [&str; 3] = ["iox2-poll", "iox2-event", "uds"];
 const PAYLOADS: [&str; 4] = ["encoder-sample", "tracker-frame", "ik", "motor-setpoint"];
 
 fn sabr_bench(args: &[&str]) -> (Output, u32) {
-    let child = Command::new(env!("CARGO_BIN_EXE_sabr"))
+    let child = Command::new(env!("CARGO_BIN_EXE_sabr-lab"))
         .arg("bench")
         .args(args)
         .stdout(std::process::Stdio::piped())

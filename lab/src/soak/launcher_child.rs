@@ -17,9 +17,10 @@ pub struct LauncherChild {
 }
 
 impl LauncherChild {
-    /// Starts `sabr launch` (this executable) with `args`, its output going to `log`.
-    pub fn spawn(args: &[OsString], log: &Path) -> anyhow::Result<Self> {
-        let exe = std::env::current_exe().context("cannot locate the sabr executable")?;
+    /// Starts `sabr launch` (the `sabr` executable in `bin_dir`) with `args`, its output going
+    /// to `log`.
+    pub fn spawn(bin_dir: &Path, args: &[OsString], log: &Path) -> anyhow::Result<Self> {
+        let exe = bin_dir.join("sabr");
         let output = std::fs::File::create(log)
             .with_context(|| format!("cannot create {}", log.display()))?;
         let child = Command::new(&exe)

@@ -648,12 +648,12 @@ mod tests {
         let params = Path::new("/tmp/a \"quoted\" dir/ik-params.toml");
         let text = launch_toml(39.6375, params);
         let graph =
-            sabr::launcher::spec::parse(Path::new("sensing.toml"), &text, bin_dir.path()).unwrap();
+            sabr_launcher::spec::parse(Path::new("sensing.toml"), &text, bin_dir.path()).unwrap();
         let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
         assert_eq!(names, NODES);
         let args = |name: &str| {
             let node = graph.nodes.iter().find(|n| n.name == name).unwrap();
-            assert_eq!(node.restart, sabr::launcher::spec::RestartPolicy::Never);
+            assert_eq!(node.restart, sabr_launcher::spec::RestartPolicy::Never);
             node.args.clone()
         };
         assert_eq!(args("rig"), ["--autoplay", "--seed", "1"]);

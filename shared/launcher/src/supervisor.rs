@@ -1,8 +1,8 @@
 //! Starting, watching, restarting and stopping the node processes of a graph.
 
-use super::placement::Prepared;
-use super::run_dir::RunDir;
-use super::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
+use crate::placement::Prepared;
+use crate::run_dir::RunDir;
+use crate::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
 use crate::progress::Progress;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;

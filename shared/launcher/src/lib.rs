@@ -5,14 +5,20 @@
 //! watchdog); stops in reverse order on Ctrl-C/SIGTERM, `--duration`, a node announcing the job
 //! done, or a required node ending; then removes the domain's iceoryx2 leftovers. Each node's
 //! stdout and stderr go to `runs/<id>/logs/<node>.log`. See [`spec`] for the file format.
+//!
+//! A library: the `sabr` command, the performance lab (`sabr-lab`) and the integration tests
+//! use it.
 
 mod build;
+mod out_dir;
 pub mod placement;
+pub mod progress;
 mod run_dir;
 pub mod spec;
 mod supervisor;
 
 pub use build::build_graph_executables;
+pub use out_dir::create_out_dir;
 pub use run_dir::RunDir;
 pub use supervisor::{describe, StopReason};
 

@@ -14,9 +14,9 @@ mod hops;
 mod iox;
 mod machine;
 mod output;
-mod payload;
+pub mod payload;
 mod pingpong;
-mod pong;
+pub mod pong;
 mod sensing;
 mod setpoints;
 mod stats;
@@ -25,7 +25,7 @@ mod uds;
 use anyhow::bail;
 use cpu::CpuShare;
 use payload::{Payload, Transport};
-use sabr::progress::Progress;
+use sabr_launcher::progress::Progress;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::path::{Path, PathBuf};
@@ -54,8 +54,6 @@ pub struct BenchArgs {
     /// executable].
     #[arg(long, value_name = "DIR")]
     bin_dir: Option<PathBuf>,
-    #[command(flatten)]
-    pong: pong::PongArgs,
 }
 
 /// A part of the bench.
@@ -95,7 +93,7 @@ impl Settings {
         } else {
             args.only.clone()
         };
-        let bin_dir = sabr::launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
+        let bin_dir = sabr_launcher::bin_dir_or_beside_sabr(args.bin_dir.as_deref())?;
         let graph_cpu_window = Duration::from_secs(if args.quick { 1 } else { 5 });
         let ready_timeout = Duration::from_secs(60);
         Ok(Self {
@@ -171,14 +169,10 @@ impl Results {
     }
 }
 
-/// Runs `sabr bench` (or, with the hidden `--role pong`, one pong process).
+/// Runs `sabr bench`.
 pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
-    if args.pong.role.is_some() {
-        pong::run(&args.pong)?;
-        return Ok(ExitCode::SUCCESS);
-    }
     let settings = Settings::new(args)?;
-    let out = crate::out_dir::create_out_dir(args.out.clone(), "bench")?;
+    let out = sabr_launcher::create_out_dir(args.out.clone(), "bench")?;
     let machine = machine::describe();
     println!("sabr bench on {machine}; output in {}", out.display());
     let mut results = Results::default();

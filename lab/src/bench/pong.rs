@@ -1,4 +1,4 @@
-//! The echo side of a ping-pong baseline: `sabr bench --role pong ...`, started by the
+//! The echo side of a ping-pong baseline: the `sabr-pong` executable, started by the
 //! measuring `sabr bench` process, answers a fixed number of messages and exits.
 
 use super::iox::IoxEnd;
@@ -13,42 +13,32 @@ use sabr_node::{Domain, Message};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// The role of a `sabr bench` process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Role {
-    /// Echo side of one ping-pong baseline (spawned by `sabr bench` itself).
-    Pong,
-}
-
-/// Hidden arguments of a pong process (set by the measuring `sabr bench`).
-#[derive(Debug, Clone, clap::Args)]
+/// Command line of `sabr-pong`, the echo side of one ping-pong baseline (started by
+/// `sabr bench` with the measuring side's transport, payload and message count).
+#[derive(Debug, Clone, clap::Parser)]
+#[command(name = "sabr-pong", about)]
 pub struct PongArgs {
-    /// Internal: run as the echo side of one ping-pong.
-    #[arg(long, hide = true, value_enum)]
-    pub role: Option<Role>,
-    /// Internal: the pong's transport.
-    #[arg(long, hide = true, value_enum, requires = "role")]
-    pub transport: Option<Transport>,
-    /// Internal: the pong's payload.
-    #[arg(long, hide = true, value_enum, requires = "role")]
-    pub payload: Option<Payload>,
-    /// Internal: messages to answer before exiting.
-    #[arg(long, hide = true, requires = "role")]
-    pub count: Option<u64>,
-    /// Internal: iceoryx2 domain of the ping-pong services.
-    #[arg(long, hide = true, requires = "role")]
+    /// Transport of the ping-pong.
+    #[arg(long, value_enum)]
+    pub transport: Transport,
+    /// Payload of the ping-pong.
+    #[arg(long, value_enum)]
+    pub payload: Payload,
+    /// Messages to answer before exiting.
+    #[arg(long)]
+    pub count: u64,
+    /// iceoryx2 domain of the ping-pong services (iceoryx2 transports).
+    #[arg(long)]
     pub domain: Option<String>,
-    /// Internal: Unix socket to connect to.
-    #[arg(long, hide = true, requires = "role")]
+    /// Unix socket to connect to (`uds`).
+    #[arg(long)]
     pub socket: Option<PathBuf>,
 }
 
 /// Runs the pong: answers `--count` messages, then exits.
 pub fn run(args: &PongArgs) -> anyhow::Result<()> {
-    let missing = |name: &str| format!("--role pong needs --{name}");
-    let transport = args.transport.with_context(|| missing("transport"))?;
-    let payload = args.payload.with_context(|| missing("payload"))?;
-    let count = args.count.with_context(|| missing("count"))?;
+    let missing = |name: &str| format!("--transport {} needs --{name}", args.transport.name());
+    let (transport, payload, count) = (args.transport, args.payload, args.count);
     match transport {
         Transport::Uds => {
             let socket = args.socket.as_ref().with_context(|| missing("socket"))?;
