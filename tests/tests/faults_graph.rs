@@ -13,7 +13,7 @@ use sabr_integration_tests::{bin, process_alive, LaunchedGraph};
 use sabr_msgs::{services, EncoderSample, MatchedSample, TrackerFrame};
 use sabr_node::iceoryx2::node::{Node, NodeState};
 use sabr_node::iceoryx2::prelude::CallbackProgression;
-use sabr_node::{Domain, Doorbell, Message, NodeRuntime, Subscriber};
+use sabr_node::{Domain, Doorbell, GraphObserver, Message, NodeRuntime, Subscriber};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -122,8 +122,10 @@ fn pid_of(graph: &mut LaunchedGraph, node: &str) -> u32 {
         .pid
 }
 
-/// Nodes of `domain` whose process died and whose resources are still there.
+/// Nodes of `domain` whose process died and whose resources are still there once the
+/// domain's dead nodes were cleaned up (as the launcher does after every node's end).
 fn dead_nodes(domain: &Domain) -> usize {
+    GraphObserver::new(domain).unwrap().cleanup_dead_nodes();
     let mut dead = 0;
     Node::<Doorbell>::list(&domain.iceoryx_config(), |state| {
         dead += usize::from(matches!(state, NodeState::Dead(_)));

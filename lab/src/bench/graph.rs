@@ -7,6 +7,7 @@ use super::stats::Measurement;
 use anyhow::{bail, Context};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
+use sabr_launcher::placement::Placement;
 use sabr_launcher::spec;
 use sabr_node::msgs::LifecycleState;
 use sabr_node::{Domain, GraphObserver};
@@ -21,6 +22,43 @@ const STOP_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// Lines of the launcher's output quoted when the graph fails.
 const LOG_TAIL_LINES: usize = 15;
+
+/// The launch file of the sensing graph the bench measures (`launch/graphs/bench-sensing.toml`).
+pub const SENSING_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/bench-sensing.toml");
+/// The launch file of the setpoint graph (`launch/graphs/bench-setpoints.toml`).
+pub const SETPOINTS_LAUNCH_FILE: &str =
+    include_str!("../../../launch/graphs/bench-setpoints.toml");
+
+/// The placement `launch_file` gives `node` (executables looked up in `bin_dir`).
+pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Placement> {
+    let graph = spec::parse(Path::new("bench graph"), launch_file, bin_dir)?;
+    graph
+        .nodes
+        .iter()
+        .find(|n| n.name == node)
+        .map(|n| n.placement.clone())
+        .with_context(|| format!("the bench graph has no node {node}"))
+}
+
+/// Runs `run` on a thread of its own placed as `placement` says (affinity and policy are per
+/// thread on Linux, so the rest of the bench is not moved).
+pub fn placed<R: Send>(
+    placement: &Placement,
+    run: impl FnOnce() -> anyhow::Result<R> + Send,
+) -> anyhow::Result<R> {
+    let prepared = placement.prepare().map_err(anyhow::Error::msg)?;
+    std::thread::scope(|scope| {
+        scope
+            .spawn(move || {
+                prepared
+                    .apply()
+                    .with_context(|| format!("cannot place the bench's thread: {placement}"))?;
+                run()
+            })
+            .join()
+            .map_err(|_| anyhow::anyhow!("the bench's placed thread panicked"))?
+    })
+}
 
 /// The iceoryx2 domain `name`, which must not be in use (no files of it exist).
 pub fn fresh_domain(name: &str) -> anyhow::Result<Domain> {
@@ -89,6 +127,7 @@ impl LiveGraph {
             .args(["--duration", &format!("{:.0}", backstop.as_secs_f64())])
             .arg("--bin-dir")
             .arg(bin_dir)
+            .current_dir(dir)
             .stdin(Stdio::null())
             .stdout(output.try_clone()?)
             .stderr(output)

@@ -9,6 +9,8 @@
 
 mod compute;
 mod cpu;
+mod doorbell;
+mod futex;
 mod graph;
 mod hops;
 mod iox;
@@ -26,6 +28,7 @@ use anyhow::bail;
 use cpu::CpuShare;
 use payload::{Payload, Transport};
 use sabr_launcher::progress::Progress;
+use sabr_launcher::placement::Placement;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::path::{Path, PathBuf};
@@ -227,7 +230,8 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards.
+/// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards,
+/// each placed as [`pinning`] says.
 fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<()> {
     let domain = Domain::new(&format!("sabr-bench-{}", std::process::id()))?;
     let socket_dir = std::env::temp_dir();
@@ -235,13 +239,16 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         for payload in Payload::ALL {
             let name = payload::baseline_name(transport, payload);
             settings.measuring(&name);
-            let measured = pingpong::run(
-                transport,
-                payload,
-                &settings.ping_pong,
-                &domain,
-                &socket_dir,
-            );
+            let measured = pinning(transport, payload, &settings.bin_dir).and_then(|pinning| {
+                pingpong::run(
+                    transport,
+                    payload,
+                    &settings.ping_pong,
+                    &pinning,
+                    &domain,
+                    &socket_dir,
+                )
+            });
             let measured = measured.map(|ping_pong| {
                 results.idle.push((name.clone(), ping_pong.pong_idle));
                 vec![ping_pong.round_trips]
@@ -256,6 +263,51 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         ));
     }
     Ok(())
+}
+
+/// The two nodes of the live-graph hop a payload stands for (producer, consumer) and the
+/// bench's launch file they are in; a producer the bench graphs lack (the motion node) is
+/// placed like the consumer.
+fn hop_nodes(payload: Payload) -> (&'static str, &'static str, &'static str) {
+    match payload {
+        Payload::EncoderSample => (graph::SENSING_LAUNCH_FILE, "encoders", "sync"),
+        Payload::TrackerFrame => (graph::SENSING_LAUNCH_FILE, "tracker", "sync"),
+        Payload::Ik => (graph::SENSING_LAUNCH_FILE, "ik", "ik"),
+        Payload::MotorSetpoint => (graph::SETPOINTS_LAUNCH_FILE, "rig", "rig"),
+    }
+}
+
+/// Where a ping-pong runs: busy polling wherever the system puts it (spinning on a shared core
+/// would only measure the time slice), `futex-cross` with the two processes on CPUs 0 and 1,
+/// every other transport as the shipped graph places the hop of that payload.
+fn pinning(
+    transport: Transport,
+    payload: Payload,
+    bin_dir: &Path,
+) -> anyhow::Result<pingpong::Pinning> {
+    let on = |cpu: usize| Placement {
+        cpus: Some(vec![cpu]),
+        sched: None,
+    };
+    match transport {
+        Transport::IoxPoll => Ok(pingpong::Pinning::default()),
+        Transport::FutexCross => {
+            if sabr_launcher::placement::online_cpus() < 2 {
+                bail!("futex-cross needs two CPUs");
+            }
+            Ok(pingpong::Pinning {
+                ping: on(0),
+                pong: on(1),
+            })
+        }
+        _ => {
+            let (file, producer, consumer) = hop_nodes(payload);
+            Ok(pingpong::Pinning {
+                ping: graph::placement_of(file, producer, bin_dir)?,
+                pong: graph::placement_of(file, consumer, bin_dir)?,
+            })
+        }
+    }
 }
 
 /// The live graphs one after the other, each in an iceoryx2 domain of its own; their launch
@@ -280,13 +332,21 @@ fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
                 });
             results.add_graph(&format!("{graph} graph"), measured);
         };
+    // The bench listens where the sync does (a second subscriber of the same streams, and
+    // the IK client beside the server), and sends setpoints from the motion node's place.
     settings.measuring("the sensing graph: hops, matching error, IK round trips, CPU");
     in_domain("sensing", &|domain| {
-        sensing::run(&settings.sensing, &dir, &settings.bin_dir, domain)
+        let place = graph::placement_of(graph::SENSING_LAUNCH_FILE, "sync", &settings.bin_dir)?;
+        graph::placed(&place, || {
+            sensing::run(&settings.sensing, &dir, &settings.bin_dir, domain)
+        })
     });
     settings.measuring("the setpoint graph: setpoint → rig, CPU");
     in_domain("setpoints", &|domain| {
-        setpoints::run(&settings.setpoints, &dir, &settings.bin_dir, domain)
+        let place = graph::placement_of(graph::SETPOINTS_LAUNCH_FILE, "rig", &settings.bin_dir)?;
+        graph::placed(&place, || {
+            setpoints::run(&settings.setpoints, &dir, &settings.bin_dir, domain)
+        })
     });
 }
 

@@ -81,17 +81,35 @@ pub enum Transport {
     #[value(name = "iox2-poll")]
     IoxPoll,
     /// iceoryx2 publish-subscribe plus an event per sample; both sides sleep in the listener
-    /// (the graph's wake-on-data pattern).
+    /// (stock iceoryx2: the event is a Unix datagram socket).
     #[value(name = "iox2-event")]
     IoxEvent,
     /// A blocking Unix-domain stream socket carrying the same bytes.
     #[value(name = "uds")]
     Uds,
+    /// The graph's transport: `sabr_node` publish-subscribe whose publisher rings the
+    /// subscriber's futex doorbell; both sides sleep on their doorbell.
+    #[value(name = "doorbell")]
+    Doorbell,
+    /// The floor: two counters in shared memory and `FUTEX_WAKE`/`FUTEX_WAIT`, nothing else;
+    /// placed as the shipped graph places the hop.
+    #[value(name = "futex")]
+    Futex,
+    /// The same raw futex ping-pong with the two processes on different cores.
+    #[value(name = "futex-cross")]
+    FutexCross,
 }
 
 impl Transport {
     /// Every transport, in the order measured and printed.
-    pub const ALL: [Transport; 3] = [Transport::IoxPoll, Transport::IoxEvent, Transport::Uds];
+    pub const ALL: [Transport; 6] = [
+        Transport::IoxPoll,
+        Transport::IoxEvent,
+        Transport::Uds,
+        Transport::Doorbell,
+        Transport::Futex,
+        Transport::FutexCross,
+    ];
 
     /// Name used in measurement names and on the command line.
     pub fn name(self) -> &'static str {
@@ -99,6 +117,9 @@ impl Transport {
             Transport::IoxPoll => "iox2-poll",
             Transport::IoxEvent => "iox2-event",
             Transport::Uds => "uds",
+            Transport::Doorbell => "doorbell",
+            Transport::Futex => "futex",
+            Transport::FutexCross => "futex-cross",
         }
     }
 }

@@ -2,6 +2,9 @@
 //! a separate process, times round trips, then watches the waiting pong's CPU use.
 
 use super::cpu::{measure_cpu_share, CpuShare};
+use super::doorbell::DoorbellEnd;
+use super::futex::FutexEnd;
+use super::graph::placed;
 use super::iox::{IoxEnd, Wait};
 use super::payload::{baseline_name, Payload, Transport};
 use super::stats::Measurement;
@@ -10,6 +13,7 @@ use anyhow::{bail, Context};
 use sabr_node::msgs::{
     EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
 };
+use sabr_launcher::placement::Placement;
 use sabr_node::{Domain, Message};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -58,29 +62,92 @@ pub fn service_names(transport: Transport, payload: Payload) -> (String, String)
     (format!("{base}/ping"), format!("{base}/pong"))
 }
 
-/// Runs one ping-pong of `payload` over `transport` against a freshly spawned pong process.
+/// Where the two processes of a ping-pong run: the measuring side (a thread of the bench)
+/// and the pong process.
+#[derive(Debug, Clone, Default)]
+pub struct Pinning {
+    /// Placement of the measuring thread.
+    pub ping: Placement,
+    /// Placement of the pong process.
+    pub pong: Placement,
+}
+
+/// Runs one ping-pong of `payload` over `transport` against a freshly spawned pong process,
+/// the two placed as `pinning` says (the measuring side on a thread of its own).
 /// iceoryx2 services live in `domain`; the Unix socket is created in `socket_dir`.
 pub fn run(
     transport: Transport,
     payload: Payload,
     plan: &Plan,
+    pinning: &Pinning,
     domain: &Domain,
     socket_dir: &Path,
 ) -> anyhow::Result<PingPong> {
+    placed(&pinning.ping, || {
+        run_here(transport, payload, plan, &pinning.pong, domain, socket_dir)
+    })
+}
+
+/// [`run`] on the calling thread.
+fn run_here(
+    transport: Transport,
+    payload: Payload,
+    plan: &Plan,
+    pong: &Placement,
+    domain: &Domain,
+    socket_dir: &Path,
+) -> anyhow::Result<PingPong> {
+    let peer = Peer {
+        transport,
+        payload,
+        plan,
+        placement: pong,
+    };
     match transport {
         Transport::IoxPoll | Transport::IoxEvent => match payload {
-            Payload::EncoderSample => {
-                run_iox::<EncoderSample, EncoderSample>(transport, payload, plan, domain)
-            }
-            Payload::TrackerFrame => {
-                run_iox::<TrackerFrame, MatchedSample>(transport, payload, plan, domain)
-            }
-            Payload::Ik => run_iox::<IkRequest, IkResponse>(transport, payload, plan, domain),
-            Payload::MotorSetpoint => {
-                run_iox::<MotorSetpoint, MotorSetpoint>(transport, payload, plan, domain)
-            }
+            Payload::EncoderSample => run_iox::<EncoderSample, EncoderSample>(&peer, domain),
+            Payload::TrackerFrame => run_iox::<TrackerFrame, MatchedSample>(&peer, domain),
+            Payload::Ik => run_iox::<IkRequest, IkResponse>(&peer, domain),
+            Payload::MotorSetpoint => run_iox::<MotorSetpoint, MotorSetpoint>(&peer, domain),
         },
-        Transport::Uds => run_uds(payload, plan, socket_dir),
+        Transport::Doorbell => match payload {
+            Payload::EncoderSample => run_doorbell::<EncoderSample, EncoderSample>(&peer, domain),
+            Payload::TrackerFrame => run_doorbell::<TrackerFrame, MatchedSample>(&peer, domain),
+            Payload::Ik => run_doorbell::<IkRequest, IkResponse>(&peer, domain),
+            Payload::MotorSetpoint => run_doorbell::<MotorSetpoint, MotorSetpoint>(&peer, domain),
+        },
+        Transport::Futex | Transport::FutexCross => run_futex(&peer, domain),
+        Transport::Uds => run_uds(&peer, socket_dir),
+    }
+}
+
+/// The pong process a ping-pong starts: what it runs and where.
+struct Peer<'a> {
+    transport: Transport,
+    payload: Payload,
+    plan: &'a Plan,
+    placement: &'a Placement,
+}
+
+impl Peer<'_> {
+    /// Starts the pong with `extra` arguments and places it.
+    fn spawn(&self, extra: &[&str]) -> anyhow::Result<PongProcess> {
+        let process = PongProcess::spawn(self.transport, self.payload, self.plan, extra)?;
+        self.placement
+            .prepare()
+            .map_err(anyhow::Error::msg)?
+            .apply_to(process.pid())
+            .with_context(|| format!("cannot place the pong process: {}", self.placement))?;
+        Ok(process)
+    }
+
+    /// Runs the plan against the started pong (see [`measure`]).
+    fn measure(
+        &self,
+        process: PongProcess,
+        round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
+    ) -> anyhow::Result<PingPong> {
+        measure(self.transport, self.payload, self.plan, process, round_trip)
     }
 }
 
@@ -89,50 +156,83 @@ pub fn wait_mode(transport: Transport) -> anyhow::Result<Wait> {
     match transport {
         Transport::IoxPoll => Ok(Wait::BusyPoll),
         Transport::IoxEvent => Ok(Wait::Event),
-        Transport::Uds => bail!("the uds transport does not use iceoryx2"),
+        other => bail!("the {} transport is not stock iceoryx2", other.name()),
     }
 }
 
-fn run_iox<Req: Message + Default, Resp: Message>(
-    transport: Transport,
-    payload: Payload,
-    plan: &Plan,
-    domain: &Domain,
-) -> anyhow::Result<PingPong> {
-    let (ping, pong) = service_names(transport, payload);
-    let end = IoxEnd::<Req, Resp>::open(domain, &ping, &pong, wait_mode(transport)?)?;
-    let mut peer = PongProcess::spawn(transport, payload, plan, &["--domain", domain.as_str()])?;
+/// Waits until `ready` says the pong opened its side, or fails if it exited or took too long.
+fn await_peer(process: &mut PongProcess, ready: impl Fn() -> bool) -> anyhow::Result<()> {
     let started = Instant::now();
-    while !end.peer_ready() {
-        peer.check_running()?;
+    while !ready() {
+        process.check_running()?;
         if started.elapsed() > STARTUP_TIMEOUT {
-            bail!("the pong process did not open its iceoryx2 ports in {STARTUP_TIMEOUT:?}");
+            bail!("the pong process did not open its side in {STARTUP_TIMEOUT:?}");
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    measure(transport, payload, plan, peer, |deadline| {
+    Ok(())
+}
+
+fn run_iox<Req: Message + Default, Resp: Message>(
+    peer: &Peer,
+    domain: &Domain,
+) -> anyhow::Result<PingPong> {
+    let (ping, pong) = service_names(peer.transport, peer.payload);
+    let end = IoxEnd::<Req, Resp>::open(domain, &ping, &pong, wait_mode(peer.transport)?)?;
+    let mut process = peer.spawn(&["--domain", domain.as_str()])?;
+    await_peer(&mut process, || end.peer_ready())?;
+    peer.measure(process, |deadline| {
         end.send(Req::default())?;
         end.receive(deadline).map(drop)
     })
 }
 
-fn run_uds(payload: Payload, plan: &Plan, socket_dir: &Path) -> anyhow::Result<PingPong> {
+fn run_doorbell<Req: Message + Default, Resp: Message>(
+    peer: &Peer,
+    domain: &Domain,
+) -> anyhow::Result<PingPong> {
+    let (ping, pong) = service_names(peer.transport, peer.payload);
+    let end = DoorbellEnd::<Req, Resp>::open(domain, "bench-ping", &ping, &pong)?;
+    let mut process = peer.spawn(&["--domain", domain.as_str()])?;
+    await_peer(&mut process, || end.peer_ready())?;
+    peer.measure(process, |deadline| {
+        end.send(Req::default())?;
+        end.receive(deadline).map(drop)
+    })
+}
+
+fn run_futex(peer: &Peer, domain: &Domain) -> anyhow::Result<PingPong> {
+    let name = futex_segment(domain, peer.transport, peer.payload);
+    let mut end = FutexEnd::create(&name)?;
+    let process = peer.spawn(&["--domain", domain.as_str()])?;
+    peer.measure(process, |deadline| {
+        end.send()?;
+        end.receive(end.sent(), deadline)
+    })
+}
+
+/// The shared-memory segment of a futex ping-pong (unique per domain, transport and payload).
+pub fn futex_segment(domain: &Domain, transport: Transport, payload: Payload) -> String {
+    format!("{domain}-{}-{}", transport.name(), payload.name())
+}
+
+fn run_uds(peer: &Peer, socket_dir: &Path) -> anyhow::Result<PingPong> {
     let path = socket_dir.join(format!(
         "sabr-bench-{}-{}.sock",
         std::process::id(),
-        payload.name()
+        peer.payload.name()
     ));
     let socket = SocketFile::bind(&path)?;
     let socket_arg = socket.path().to_string_lossy().into_owned();
-    let mut peer = PongProcess::spawn(Transport::Uds, payload, plan, &["--socket", &socket_arg])?;
-    let stream = socket.accept(STARTUP_TIMEOUT, || peer.check_running())?;
+    let mut process = peer.spawn(&["--socket", &socket_arg])?;
+    let stream = socket.accept(STARTUP_TIMEOUT, || process.check_running())?;
     let mut end = UdsEnd::new(
         stream,
-        payload.request_bytes(),
-        payload.response_bytes(),
+        peer.payload.request_bytes(),
+        peer.payload.response_bytes(),
         ROUND_TRIP_TIMEOUT,
     )?;
-    measure(Transport::Uds, payload, plan, peer, |_| {
+    peer.measure(process, |_| {
         end.send()?;
         end.receive()
     })

@@ -3,7 +3,9 @@
 
 use super::iox::IoxEnd;
 use super::payload::{Payload, Transport};
-use super::pingpong::{service_names, wait_mode, PEER_TIMEOUT};
+use super::doorbell::DoorbellEnd;
+use super::futex::FutexEnd;
+use super::pingpong::{futex_segment, service_names, wait_mode, PEER_TIMEOUT};
 use super::uds::UdsEnd;
 use anyhow::Context;
 use sabr_node::msgs::{
@@ -55,36 +57,63 @@ pub fn run(args: &PongArgs) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Transport::IoxPoll | Transport::IoxEvent => {
+        Transport::IoxPoll | Transport::IoxEvent | Transport::Doorbell => {
             let domain = Domain::new(args.domain.as_deref().with_context(|| missing("domain"))?)?;
+            let echo = Echo {
+                transport,
+                payload,
+                domain: &domain,
+                count,
+            };
             match payload {
-                Payload::EncoderSample => {
-                    echo::<EncoderSample, EncoderSample>(transport, payload, &domain, count)
-                }
-                Payload::TrackerFrame => {
-                    echo::<TrackerFrame, MatchedSample>(transport, payload, &domain, count)
-                }
-                Payload::Ik => echo::<IkRequest, IkResponse>(transport, payload, &domain, count),
-                Payload::MotorSetpoint => {
-                    echo::<MotorSetpoint, MotorSetpoint>(transport, payload, &domain, count)
-                }
+                Payload::EncoderSample => echo.run::<EncoderSample, EncoderSample>(),
+                Payload::TrackerFrame => echo.run::<TrackerFrame, MatchedSample>(),
+                Payload::Ik => echo.run::<IkRequest, IkResponse>(),
+                Payload::MotorSetpoint => echo.run::<MotorSetpoint, MotorSetpoint>(),
             }
+        }
+        Transport::Futex | Transport::FutexCross => {
+            let domain = Domain::new(args.domain.as_deref().with_context(|| missing("domain"))?)?;
+            let segment = futex_segment(&domain, transport, payload);
+            let mut end = FutexEnd::open(&segment, PEER_TIMEOUT)?;
+            for index in 0..count {
+                let expected = u32::try_from(index + 1).context("too many messages")?;
+                end.receive(expected, Instant::now() + PEER_TIMEOUT)
+                    .with_context(|| format!("pong: message {index} of {count}"))?;
+                end.send()?;
+            }
+            Ok(())
         }
     }
 }
 
-fn echo<Req: Message, Resp: Message + Default>(
+/// The echo loop of an iceoryx2 or doorbell pong.
+struct Echo<'a> {
     transport: Transport,
     payload: Payload,
-    domain: &Domain,
+    domain: &'a Domain,
     count: u64,
-) -> anyhow::Result<()> {
-    let (ping, pong) = service_names(transport, payload);
-    let end = IoxEnd::<Resp, Req>::open(domain, &pong, &ping, wait_mode(transport)?)?;
-    for index in 0..count {
-        end.receive(Instant::now() + PEER_TIMEOUT)
-            .with_context(|| format!("pong: message {index} of {count}"))?;
-        end.send(Resp::default())?;
+}
+
+impl Echo<'_> {
+    fn run<Req: Message, Resp: Message + Default>(&self) -> anyhow::Result<()> {
+        let (ping, pong) = service_names(self.transport, self.payload);
+        let count = self.count;
+        if self.transport == Transport::Doorbell {
+            let end = DoorbellEnd::<Resp, Req>::open(self.domain, "bench-pong", &pong, &ping)?;
+            for index in 0..count {
+                end.receive(Instant::now() + PEER_TIMEOUT)
+                    .with_context(|| format!("pong: message {index} of {count}"))?;
+                end.send(Resp::default())?;
+            }
+            return Ok(());
+        }
+        let end = IoxEnd::<Resp, Req>::open(self.domain, &pong, &ping, wait_mode(self.transport)?)?;
+        for index in 0..count {
+            end.receive(Instant::now() + PEER_TIMEOUT)
+                .with_context(|| format!("pong: message {index} of {count}"))?;
+            end.send(Resp::default())?;
+        }
+        Ok(())
     }
-    Ok(())
 }

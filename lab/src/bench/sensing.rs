@@ -22,7 +22,7 @@
 
 use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
-use super::graph::{GraphMeasured, LiveGraph};
+use super::graph::{GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE};
 use super::hops::{ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, TRACKER_FRAME_TO_MATCHED};
 use super::stats::{format_ns, Measurement};
 use anyhow::{bail, Context};
@@ -120,7 +120,7 @@ pub fn run(
     let mut probe = Probe::open(&domain)?;
     let mut graph = LiveGraph::start(
         "sensing",
-        &launch_toml(latency_ms, &params_file),
+        SENSING_LAUNCH_FILE,
         dir,
         bin_dir,
         domain,
@@ -162,55 +162,6 @@ fn cpu_label(node: &str) -> String {
         "rig" => "sensing/rig-autoplay".to_owned(),
         other => format!("sensing/{other}"),
     }
-}
-
-/// The launch file: the sensing chain of `launch/graphs/sim-sensing.toml` and the IK server
-/// (serving `ik_params`), the sync given the session's true tracker latency, no restarts.
-pub fn launch_toml(latency_ms: f64, ik_params: &Path) -> String {
-    let params = toml::Value::String(ik_params.display().to_string());
-    format!(
-        r#"# Written by `sabr bench`: the sensing chain of launch/graphs/sim-sensing.toml with the
-# rig playing session {SESSION_SEED}, and the IK server. No restarts: a node that ends spoils the
-# measurement, so it stops the graph.
-[graph]
-stop_grace_s = 3.0
-term_grace_s = 2.0
-
-[[node]]
-name = "rig"
-exec = "sabr-rig"
-args = ["--autoplay", "--seed", "{SESSION_SEED}"]
-
-[[node]]
-name = "encoders"
-exec = "sabr-encoders"
-depends_on = ["rig"]
-
-[[node]]
-name = "tracker"
-exec = "sabr-tracker"
-depends_on = ["rig"]
-ready_timeout_s = 15.0
-
-# The simulated tracker's true latency for session {SESSION_SEED}.
-[[node]]
-name = "sync"
-exec = "sabr-sync"
-args = ["--latency-ms", "{latency_ms}"]
-depends_on = ["encoders", "tracker"]
-
-[[node]]
-name = "recorder"
-exec = "sabr-recorder"
-depends_on = ["encoders", "tracker", "sync"]
-
-# Serves the session's true parameters (a perfect calibration).
-[[node]]
-name = "ik"
-exec = "sabr-ik"
-args = ["--params", {params}]
-"#
-    )
 }
 
 /// The bench's node in the sensing graph's domain.
@@ -640,15 +591,17 @@ mod tests {
     }
 
     #[test]
-    fn launch_file_runs_the_chain_and_the_ik_server_with_the_sessions_latency() {
+    fn launch_file_runs_the_chain_and_the_ik_server_with_the_sessions_true_latency() {
         let bin_dir = tempfile::tempdir().unwrap();
         for exec in NODES.map(|node| format!("sabr-{node}")) {
             std::fs::write(bin_dir.path().join(exec), "").unwrap();
         }
-        let params = Path::new("/tmp/a \"quoted\" dir/ik-params.toml");
-        let text = launch_toml(39.6375, params);
-        let graph =
-            sabr_launcher::spec::parse(Path::new("sensing.toml"), &text, bin_dir.path()).unwrap();
+        let graph = sabr_launcher::spec::parse(
+            Path::new("bench-sensing.toml"),
+            SENSING_LAUNCH_FILE,
+            bin_dir.path(),
+        )
+        .unwrap();
         let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
         assert_eq!(names, NODES);
         let args = |name: &str| {
@@ -656,11 +609,17 @@ mod tests {
             assert_eq!(node.restart, sabr_launcher::spec::RestartPolicy::Never);
             node.args.clone()
         };
-        assert_eq!(args("rig"), ["--autoplay", "--seed", "1"]);
-        assert_eq!(args("sync"), ["--latency-ms", "39.6375"]);
-        assert_eq!(
-            args("ik"),
-            ["--params", "/tmp/a \"quoted\" dir/ik-params.toml"]
+        assert_eq!(args("rig"), ["--autoplay", "--seed", &SESSION_SEED.to_string()]);
+        assert_eq!(args("ik"), ["--params", "ik-params.toml"]);
+        let sync = args("sync");
+        assert_eq!(sync[0], "--latency-ms");
+        let configured: f64 = sync[1].parse().unwrap();
+        let session = Session::new(&SimConfig::new(SESSION_SEED)).unwrap();
+        let tracker = session.tracker_truth();
+        let truth = tracker.base_latency_ms + tracker.extra_latency_ms;
+        assert!(
+            (configured - truth).abs() < 1e-3,
+            "launch file {configured} ms, session truth {truth} ms"
         );
     }
 

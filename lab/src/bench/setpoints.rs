@@ -18,9 +18,8 @@
 //! tick is sampled evenly: waiting on the latches alone would publish each setpoint right
 //! after a tick started.
 
-use super::compute::SESSION_SEED;
 use super::cpu::measure_cpu_shares;
-use super::graph::{GraphMeasured, LiveGraph};
+use super::graph::{GraphMeasured, LiveGraph, SETPOINTS_LAUNCH_FILE};
 use super::hops::SETPOINT_TO_RIG;
 use super::stats::Measurement;
 use anyhow::{bail, Context};
@@ -82,7 +81,7 @@ pub fn run(
     let mut probe = Probe::open(&domain)?;
     let mut graph = LiveGraph::start(
         "setpoints",
-        &launch_toml(),
+        SETPOINTS_LAUNCH_FILE,
         dir,
         bin_dir,
         domain,
@@ -114,23 +113,6 @@ pub fn run(
         idle,
         notes: Vec::new(),
     })
-}
-
-/// The launch file: the rig of session [`SESSION_SEED`] following motor setpoints.
-pub fn launch_toml() -> String {
-    format!(
-        r#"# Written by `sabr bench`: the rig of session {SESSION_SEED} following motor setpoints (no
-# autoplay, no motion node: the bench publishes the setpoints).
-[graph]
-stop_grace_s = 3.0
-term_grace_s = 2.0
-
-[[node]]
-name = "rig"
-exec = "sabr-rig"
-args = ["--seed", "{SESSION_SEED}"]
-"#
-    )
 }
 
 /// The bench's node in the setpoint graph's domain.
@@ -308,12 +290,12 @@ mod tests {
         let bin_dir = tempfile::tempdir().unwrap();
         std::fs::write(bin_dir.path().join("sabr-rig"), "").unwrap();
         let graph = sabr_launcher::spec::parse(
-            Path::new("setpoints.toml"),
-            &launch_toml(),
+            Path::new("bench-setpoints.toml"),
+            SETPOINTS_LAUNCH_FILE,
             bin_dir.path(),
         )
         .unwrap();
         assert_eq!(graph.nodes.len(), 1);
-        assert_eq!(graph.nodes[0].args, ["--seed", "1"]);
+        assert_eq!(graph.nodes[0].args, ["--seed", &super::super::compute::SESSION_SEED.to_string()]);
     }
 }

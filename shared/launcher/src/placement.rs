@@ -171,17 +171,34 @@ impl Prepared {
         }
         Ok(())
     }
+
+    /// Applies the placement to the running process `pid` (its main thread), e.g. the peer
+    /// of a measurement started without one.
+    pub fn apply_to(&self, pid: u32) -> Result<(), nix::errno::Errno> {
+        let pid = i32::try_from(pid).map_err(|_| nix::errno::Errno::ESRCH)?;
+        if let Some(cpus) = &self.cpus {
+            nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(pid), cpus)?;
+        }
+        if let Some(sched) = self.sched {
+            set_scheduler_of(pid, sched)?;
+        }
+        Ok(())
+    }
 }
 
 /// `sched_setscheduler(0, policy, priority)` on the calling thread.
-#[allow(unsafe_code)]
 fn set_scheduler(sched: Sched) -> Result<(), nix::errno::Errno> {
+    set_scheduler_of(0, sched)
+}
+
+/// `sched_setscheduler(pid, policy, priority)`; pid 0 is the calling thread.
+#[allow(unsafe_code)]
+fn set_scheduler_of(pid: i32, sched: Sched) -> Result<(), nix::errno::Errno> {
     let param = libc::sched_param {
         sched_priority: libc::c_int::from(sched.priority()),
     };
-    // SAFETY: `param` is a valid sched_param for the duration of the call; pid 0 is the
-    // calling thread.
-    let result = unsafe { libc::sched_setscheduler(0, sched.policy(), &param) };
+    // SAFETY: `param` is a valid sched_param for the duration of the call.
+    let result = unsafe { libc::sched_setscheduler(pid, sched.policy(), &param) };
     if result == 0 {
         Ok(())
     } else {

@@ -40,6 +40,7 @@ mod doorbell_rpc;
 mod events;
 mod message;
 mod observer;
+mod orphans;
 mod ports;
 mod runtime;
 mod service;

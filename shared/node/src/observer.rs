@@ -14,6 +14,7 @@ use std::time::Duration;
 pub struct GraphObserver<S: Transport = Doorbell> {
     lifecycle: iceoryx2::port::subscriber::Subscriber<S, Lifecycle, ()>,
     node: Node<S>,
+    domain: Domain,
 }
 
 impl GraphObserver<Doorbell> {
@@ -36,7 +37,11 @@ impl<S: Transport> GraphObserver<S> {
             .buffer_size(LIFECYCLE_BUFFER)
             .create()
             .map_err(|e| NodeError::port(services::GRAPH_LIFECYCLE, "create subscriber", e))?;
-        let observer = Self { node, lifecycle };
+        let observer = Self {
+            node,
+            lifecycle,
+            domain: domain.clone(),
+        };
         observer.cleanup_dead_nodes();
         Ok(observer)
     }
@@ -76,7 +81,7 @@ impl<S: Transport> GraphObserver<S> {
                 "could not remove the resources of some dead nodes"
             );
         }
-        state.cleanups
+        state.cleanups + crate::orphans::remove_orphaned_nodes::<S>(&self.domain) as u64
     }
 
     /// The underlying iceoryx2 node.

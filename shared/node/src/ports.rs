@@ -5,6 +5,7 @@ use crate::message::Message;
 use crate::transport::{Transport, Waitable};
 use crate::NodeError;
 use crate::Doorbell;
+use iceoryx2::prelude::PortFactory;
 use iceoryx2::service::port_factory::publish_subscribe;
 use std::time::{Duration, Instant};
 
@@ -43,6 +44,11 @@ impl<T: Message, S: Transport> Publisher<T, S> {
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service
+    }
+
+    /// Subscribers of the service right now (of any process).
+    pub fn subscribers(&self) -> usize {
+        self.factory.dynamic_config().number_of_subscribers()
     }
 }
 

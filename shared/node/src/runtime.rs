@@ -177,10 +177,12 @@ impl<S: Transport> NodeRuntime<S> {
         // Creation already removed dead nodes; a second pass waits for any other process that
         // was cleaning up at the same moment.
         let cleanup = node.blocking_cleanup_dead_nodes(Duration::from_millis(500));
-        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
+        let orphans = crate::orphans::remove_orphaned_nodes::<S>(&domain);
+        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 || orphans > 0 {
             tracing::info!(
                 removed = cleanup.cleanups,
                 failed = cleanup.failed_cleanups,
+                half_removed = orphans,
                 "removed stale iceoryx2 resources of dead nodes"
             );
         }

@@ -57,7 +57,9 @@ pub(crate) mod sealed {
     }
 
     /// The wake-up operations of a transport (not implementable outside this crate).
-    pub trait Sealed: iceoryx2::service::Service + 'static {
+    pub trait Sealed:
+        iceoryx2::service::Service + iceoryx2::service::internal::ServiceInternal<Self> + 'static
+    {
         /// Per-process inbound state: nothing, or the process's doorbell.
         type Inbound: Clone;
         /// How a subscriber is woken: its own listener, or an event id of the doorbell.
