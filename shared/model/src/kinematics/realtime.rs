@@ -232,20 +232,21 @@ impl RealtimeGeometry {
         direction: DVec3,
         near: &Joints,
     ) -> Result<Joints, KinematicsError> {
-        self.solve(tip, direction, near, &self.tilts)
+        self.solve(tip, direction, near, self.tilts.any)
     }
 
-    /// [`Self::inverse`] of the chain with the joint axes turned by `tilts`.
+    /// [`Self::inverse`]; with `tilted` false, of the chain without its axis tilts (the closed
+    /// form alone).
     fn solve(
         &self,
         tip: DVec3,
         direction: DVec3,
         near: &Joints,
-        tilts: &AxisTilts,
+        tilted: bool,
     ) -> Result<Joints, KinematicsError> {
         let length = check_inverse_inputs(&tip.to_array(), &direction.to_array(), near)?;
         let z = direction / length;
-        if tilts.any {
+        if tilted {
             return self.inverse_tilted(tip, z, near);
         }
         let p_r = tip - self.l_n * z;
@@ -293,7 +294,7 @@ impl RealtimeGeometry {
         z: DVec3,
         near: &Joints,
     ) -> Result<Joints, KinematicsError> {
-        let q = self.solve(tip, z, near, &UNTILTED)?;
+        let q = self.solve(tip, z, near, false)?;
         let across = z.cross(DVec3::X);
         let first = if across.length() > 0.1 {
             across.normalize()
