@@ -1,4 +1,6 @@
 //! Forward and inverse kinematics (docs/robot-model.md §3–§4). All poses in `Bb`, mm and rad.
+//! [`forward`] and [`inverse`] work on nalgebra types (the calibration's); [`realtime`] is the
+//! same kinematics on glam's f64 types for the paths that run at 1–2 kHz.
 
 use nalgebra::{
     Isometry3, Matrix3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3,
