@@ -10,9 +10,10 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use clap::ArgGroup;
-use nalgebra::{Point3, Vector3};
+use glam::DVec3;
+use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{
-    forward, inverse, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,
+    forward, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,
     DIRECTION_DEAD_BAND_COUNTS, HOME_JOINTS,
 };
 
@@ -99,10 +100,11 @@ pub fn run_fk(args: &FkArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// Runs `sabr ik`: prints `q1..q5` (rad) and, when the parameters define joint offsets,
-/// `c1..c5` (fractional counts for a robot at rest) per target row.
+/// `c1..c5` (fractional counts for a robot at rest) per target row. It solves with the
+/// real-time kinematics, as the IK server does, so both give the same joints.
 pub fn run_ik(args: &IkArgs) -> anyhow::Result<ExitCode> {
     let params = load_params(&args.params)?;
-    let geometry = params.effective_geometry();
+    let geometry = RealtimeGeometry::from(&params.effective_geometry());
     let with_counts = params.joints.offset.is_some();
     let mut reader = ColumnReader::open(&args.targets, &POSE_COLUMNS)?;
     let mut out = output()?;
@@ -113,9 +115,10 @@ pub fn run_ik(args: &IkArgs) -> anyhow::Result<ExitCode> {
     out.write_record(&header)?;
     let mut failures = 0;
     while let Some(v) = reader.next_row()? {
-        let tip = Point3::new(v[0], v[1], v[2]);
-        let direction = Vector3::new(v[3], v[4], v[5]);
-        let row = inverse(&geometry, &tip, &direction, &HOME_JOINTS)
+        let tip = DVec3::new(v[0], v[1], v[2]);
+        let direction = DVec3::new(v[3], v[4], v[5]);
+        let row = geometry
+            .inverse(tip, direction, &HOME_JOINTS)
             .map_err(|error| error.to_string())
             .and_then(|q| joints_row(&params, &q, with_counts));
         match row {

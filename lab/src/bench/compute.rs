@@ -1,9 +1,12 @@
-//! Compute costs: forward and inverse kinematics per solve, recording a simulated session
-//! (`sabr sim record`) and calibrating it (what `sabr calibrate` does: read, calibrate, write).
+//! Compute costs: forward and inverse kinematics per solve (the nalgebra kinematics and the
+//! real-time glam one), recording a simulated session (`sabr sim record`) and calibrating it
+//! (what `sabr calibrate` does: read, calibrate, write).
 
 use super::stats::{duration_ns, Measurement};
 use anyhow::{bail, Context};
+use glam::DVec3;
 use sabr_calibration::{calibrate, write_outputs, CalibrationOptions};
+use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{forward, inverse, Geometry, Joints, RobotParams, HOME_JOINTS};
 use sabr_recording::Recording;
 use sabr_sim::{record_session, write_session, SimConfig};
@@ -65,23 +68,35 @@ pub fn targets(geometry: &Geometry) -> anyhow::Result<Vec<Target>> {
     Ok(found)
 }
 
-/// Per-solve time of FK (`compute/fk`) and IK (`compute/ik`) with the nominal model, in
-/// batches of [`SOLVES_PER_BATCH`] (`batches` recorded values each, ns/solve).
-pub fn kinematics(batches: u64) -> anyhow::Result<[Measurement; 2]> {
+/// Per-solve times with the nominal model, in batches of [`SOLVES_PER_BATCH`] (`batches`
+/// recorded values each, ns/solve), in the order of [`KinematicsCosts`].
+pub fn kinematics(batches: u64) -> anyhow::Result<KinematicsCosts> {
     let geometry = RobotParams::nominal().effective_geometry();
+    let realtime = RealtimeGeometry::from(&geometry);
     let targets = targets(&geometry)?;
+    let glam_targets: Vec<(DVec3, DVec3)> = targets
+        .iter()
+        .map(|target| {
+            (
+                DVec3::from_array(target.tip.coords.into()),
+                DVec3::from_array(target.direction.into()),
+            )
+        })
+        .collect();
     let mut fk = Measurement::new("compute/fk", "ns/solve");
     let mut ik = Measurement::new("compute/ik", "ns/solve");
-    let mut next = targets.iter().cycle();
+    let mut fk_glam = Measurement::new("compute/fk-glam", "ns/solve");
+    let mut ik_glam = Measurement::new("compute/ik-glam", "ns/solve");
+    let mut next = targets.iter().zip(&glam_targets).cycle();
     for _ in 0..batches {
         let started = Instant::now();
-        for target in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+        for (target, _) in next.by_ref().take(SOLVES_PER_BATCH as usize) {
             black_box(forward(black_box(&geometry), black_box(&target.joints)))?;
         }
         fk.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
 
         let started = Instant::now();
-        for target in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+        for (target, _) in next.by_ref().take(SOLVES_PER_BATCH as usize) {
             black_box(inverse(
                 black_box(&geometry),
                 black_box(&target.tip),
@@ -90,8 +105,48 @@ pub fn kinematics(batches: u64) -> anyhow::Result<[Measurement; 2]> {
             ))?;
         }
         ik.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
+
+        let started = Instant::now();
+        for (target, _) in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+            black_box(black_box(&realtime).forward(black_box(&target.joints)))?;
+        }
+        fk_glam.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
+
+        let started = Instant::now();
+        for (_, &(tip, direction)) in next.by_ref().take(SOLVES_PER_BATCH as usize) {
+            black_box(black_box(&realtime).inverse(
+                black_box(tip),
+                black_box(direction),
+                black_box(&HOME_JOINTS),
+            ))?;
+        }
+        ik_glam.record(duration_ns(started.elapsed()) / SOLVES_PER_BATCH)?;
     }
-    Ok([fk, ik])
+    Ok(KinematicsCosts {
+        fk,
+        ik,
+        fk_glam,
+        ik_glam,
+    })
+}
+
+/// Per-solve costs of the kinematics (ns/solve).
+pub struct KinematicsCosts {
+    /// `compute/fk`: `sabr_model::forward` (nalgebra).
+    pub fk: Measurement,
+    /// `compute/ik`: `sabr_model::inverse` (nalgebra).
+    pub ik: Measurement,
+    /// `compute/fk-glam`: `RealtimeGeometry::forward` (glam).
+    pub fk_glam: Measurement,
+    /// `compute/ik-glam`: `RealtimeGeometry::inverse` (glam), what the IK server runs.
+    pub ik_glam: Measurement,
+}
+
+impl KinematicsCosts {
+    /// The four measurements, in the order of the report's rows.
+    pub fn into_rows(self) -> Vec<Measurement> {
+        vec![self.fk, self.ik, self.fk_glam, self.ik_glam]
+    }
 }
 
 /// Solves per second of the median batch of a `ns/solve` measurement (the mean would fold in
@@ -148,11 +203,23 @@ mod tests {
 
     #[test]
     fn kinematics_records_one_value_per_batch() {
-        let [fk, ik] = kinematics(3).unwrap();
-        assert_eq!(fk.summary().count, 3);
-        assert_eq!(ik.summary().count, 3);
-        assert!(fk.summary().p50 > 0 && ik.summary().p50 > 0);
-        let rate = solves_per_second(&ik);
+        let rows = kinematics(3).unwrap().into_rows();
+        let names: Vec<&str> = rows.iter().map(|row| row.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "compute/fk",
+                "compute/ik",
+                "compute/fk-glam",
+                "compute/ik-glam"
+            ]
+        );
+        for row in &rows {
+            assert_eq!(row.summary().count, 3);
+            assert!(row.summary().p50 > 0);
+        }
+        let ik = &rows[1];
+        let rate = solves_per_second(ik);
         let median_ns = ik.summary().p50 as f64;
         assert!(
             (rate * median_ns - 1e9).abs() < 1.0,

@@ -11,7 +11,8 @@ pub const BLOCKING_P99_FACTOR: f64 = 2.0;
 /// Goal: IK request → response p99 (ns).
 pub const IK_ROUND_TRIP_P99_LIMIT_NS: u64 = 50_000;
 
-/// Goal: one IK solve (ns), judged on the median batch of `compute/ik`.
+/// Goal: one IK solve (ns), judged on the median batch of `compute/ik-glam` (the IK server's
+/// solver).
 pub const IK_SOLVE_LIMIT_NS: u64 = 2_000;
 
 /// Goal: synchronizer exposure-time matching error p99 (ns).

@@ -353,15 +353,18 @@ fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
 /// Kinematics per solve, then `sim record` and calibration of that recording in `out/work`
 /// (removed afterwards).
 fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
-    settings.measuring("compute/fk and compute/ik");
+    settings.measuring("compute/fk, compute/ik and their glam versions");
     let kinematics = compute::kinematics(settings.kinematics_batches);
-    if let Ok([fk, ik]) = &kinematics {
-        let ik_median = ik.summary().p50;
+    if let Ok(costs) = &kinematics {
+        let ik_median = costs.ik_glam.summary().p50;
         results.notes.push(format!(
-            "\nFK: {:.0} solves/s, IK: {:.0} solves/s (median of {} batches of {}); \
-             one IK solve {} (goal ≤ {}: {})",
-            compute::solves_per_second(fk),
-            compute::solves_per_second(ik),
+            "\nFK: {:.0} solves/s, IK: {:.0} solves/s; glam FK: {:.0} solves/s, glam IK: {:.0} \
+             solves/s (median of {} batches of {}); one IK solve of the server (glam) {} \
+             (goal ≤ {}: {})",
+            compute::solves_per_second(&costs.fk),
+            compute::solves_per_second(&costs.ik),
+            compute::solves_per_second(&costs.fk_glam),
+            compute::solves_per_second(&costs.ik_glam),
             settings.kinematics_batches,
             compute::SOLVES_PER_BATCH,
             format_ns(ik_median),
@@ -373,7 +376,10 @@ fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
             }
         ));
     }
-    results.add("compute/fk, compute/ik", kinematics.map(Vec::from));
+    results.add(
+        "compute/fk, compute/ik, compute/fk-glam, compute/ik-glam",
+        kinematics.map(compute::KinematicsCosts::into_rows),
+    );
 
     let work = out.join("work");
     let session = work.join("session");

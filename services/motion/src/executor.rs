@@ -14,6 +14,7 @@ use crate::limits::{check_plan, JointLimits};
 use crate::line::{line_segments, IkService, LinePlanner, LineSpec, PlannerStep};
 use crate::plan::{Segment, PERIOD_NS};
 use sabr_ik::ParameterSet;
+use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{Counts, JointMotion, Joints, RobotParams};
 use sabr_msgs::MotionState;
 use std::collections::VecDeque;
@@ -518,7 +519,7 @@ impl Executor {
                 spec.validate().map(|()| spec)
             }
             None => LineSpec::centred_insertion(
-                &params.effective_geometry(),
+                &RealtimeGeometry::from(&params.effective_geometry()),
                 &params.joints.home_stops,
                 line.length_mm,
                 line.speed_mm_s,

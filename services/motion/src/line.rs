@@ -5,7 +5,8 @@
 
 use crate::plan::{Segment, PERIOD_S};
 use nalgebra::{Point3, Unit, Vector3};
-use sabr_model::{forward, Geometry, JointMotion, Joints, RobotParams, HOME_JOINTS};
+use sabr_model::realtime::RealtimeGeometry;
+use sabr_model::{JointMotion, Joints, RobotParams, HOME_JOINTS};
 use sabr_msgs::{IkRequest, IkResponse, IkStatus};
 use std::f64::consts::PI;
 
@@ -46,18 +47,20 @@ impl LineSpec {
     /// An insertion along the needle centred on the tip of the excitation centre's pose
     /// (the middle of the calibrated workspace), computed with `geometry`.
     pub fn centred_insertion(
-        geometry: &Geometry,
+        geometry: &RealtimeGeometry,
         home_stops: &Joints,
         length_mm: f64,
         speed_mm_s: f64,
         dwell_s: f64,
     ) -> Result<Self, String> {
         let centre = sabr_model::plan::excitation_centre(home_stops, &HOME_JOINTS);
-        let pose = forward(geometry, &centre)
+        let pose = geometry
+            .forward(&centre)
             .map_err(|e| format!("the excitation centre has no forward kinematics: {e}"))?;
+        let start = pose.tip - pose.direction * (length_mm / 2.0);
         let spec = Self {
-            start: pose.tip - pose.direction.into_inner() * (length_mm / 2.0),
-            direction: pose.direction,
+            start: Point3::from(start.to_array()),
+            direction: Unit::new_unchecked(Vector3::from(pose.direction.to_array())),
             length_mm,
             speed_mm_s,
             dwell_s,
@@ -293,6 +296,7 @@ mod tests {
     use super::*;
     use crate::limits::{check_plan, JointLimits, DEFAULT_MAX_SPEED_RAD_S, DEFAULT_RANGE_RAD};
     use crate::plan::PERIOD_NS;
+    use glam::DVec3;
     use sabr_ik::{IkSolver, ParameterSet};
     use std::path::Path;
 
@@ -337,7 +341,7 @@ mod tests {
     #[test]
     fn default_line_is_straight_reachable_and_within_the_default_limits() {
         let params = calibrated();
-        let geometry = params.effective_geometry();
+        let geometry = RealtimeGeometry::from(&params.effective_geometry());
         let spec =
             LineSpec::centred_insertion(&geometry, &params.joints.home_stops, 20.0, 5.0, 0.5)
                 .unwrap();
@@ -357,18 +361,21 @@ mod tests {
         // Every setpoint of the line puts the tip on the line (FK of the interpolated joints),
         // from its start to its end, with the needle along it.
         let line = &segments[1];
+        let start = DVec3::from_array(spec.start.coords.into());
+        let direction = DVec3::from_array(spec.direction.into_inner().into());
         let mut max_off = 0.0f64;
         for q in &line.joints {
-            let pose = forward(&geometry, q).unwrap();
-            let along = (pose.tip - spec.start).dot(&spec.direction);
-            let off = (pose.tip - spec.start - spec.direction.into_inner() * along).norm();
+            let pose = geometry.forward(q).unwrap();
+            let along = (pose.tip - start).dot(direction);
+            let off = (pose.tip - start - direction * along).length();
             max_off = max_off.max(off);
             assert!((-1e-6..=spec.length_mm + 1e-6).contains(&along));
-            assert!((pose.direction.into_inner() - spec.direction.into_inner()).norm() < 1e-6);
+            assert!((pose.direction - direction).length() < 1e-6);
         }
         assert!(max_off < 1e-3, "tip leaves the line by {max_off} mm");
-        let last = forward(&geometry, line.joints.last().unwrap()).unwrap();
-        assert!((last.tip - spec.end()).norm() < 1e-6);
+        let last = geometry.forward(line.joints.last().unwrap()).unwrap();
+        let end = DVec3::from_array(spec.end().coords.into());
+        assert!((last.tip - end).length() < 1e-6);
         // Counts of the line are the IK server's: each waypoint's counts at its sample.
         let counts = line.counts.as_ref().unwrap();
         let dwell = (spec.dwell_s / PERIOD_S).round() as usize;
@@ -386,7 +393,7 @@ mod tests {
     #[test]
     fn an_unreachable_waypoint_refuses_the_line_and_names_it() {
         let params = calibrated();
-        let geometry = params.effective_geometry();
+        let geometry = RealtimeGeometry::from(&params.effective_geometry());
         let mut spec =
             LineSpec::centred_insertion(&geometry, &params.joints.home_stops, 20.0, 5.0, 0.5)
                 .unwrap();
@@ -399,7 +406,7 @@ mod tests {
     #[test]
     fn the_planner_waits_briefly_for_the_server_to_load_the_planned_parameter_set() {
         let params = calibrated();
-        let geometry = params.effective_geometry();
+        let geometry = RealtimeGeometry::from(&params.effective_geometry());
         let spec = LineSpec::centred_insertion(&geometry, &params.joints.home_stops, 5.0, 5.0, 0.1)
             .unwrap();
         let mut old_server = local_ik(&params, 1);
@@ -420,7 +427,7 @@ mod tests {
     #[test]
     fn bad_line_numbers_are_rejected() {
         let params = calibrated();
-        let geometry = params.effective_geometry();
+        let geometry = RealtimeGeometry::from(&params.effective_geometry());
         let stops = params.joints.home_stops;
         assert!(LineSpec::centred_insertion(&geometry, &stops, 0.0, 5.0, 0.5).is_err());
         assert!(LineSpec::centred_insertion(&geometry, &stops, 10.0, f64::NAN, 0.5).is_err());

@@ -2,7 +2,8 @@
 //!
 //! - [`IkSolver`]: answers an [`IkRequest`] (needle tip and direction in `Bb`, mm) with the
 //!   joints (rad) and motor counts of the loaded [`ParameterSet`], using the same library calls
-//!   as `sabr ik` (`sabr_model::inverse`, then `RobotParams::counts_from_joints` at rest).
+//!   as `sabr ik` (`sabr_model::realtime::RealtimeGeometry::inverse`, then
+//!   `RobotParams::counts_from_joints` at rest).
 //!   NaN, infinite, degenerate and unreachable targets get an error status and a reason, never
 //!   a guess.
 //! - [`server::serve`]: the event-driven server loop of the `sabr-ik` process on

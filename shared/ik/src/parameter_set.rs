@@ -1,6 +1,7 @@
 //! The parameter set the IK server and the motion executor serve: a parameter file read by
 //! the one reader (`sabr_model::read_params_file`), its FK/IK geometry, version and source.
 
+use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{read_params_file, Geometry, ParamsFileError, RobotParams};
 use std::path::{Path, PathBuf};
 
@@ -12,6 +13,8 @@ pub struct ParameterSet {
     pub params: RobotParams,
     /// `params.effective_geometry()`, computed once.
     pub geometry: Geometry,
+    /// That geometry prepared for the real-time (glam) kinematics, computed once.
+    pub realtime: RealtimeGeometry,
     /// Version: 0 for a file given on the command line, else the calibrator's announced
     /// `ParameterSetAnnouncement::version`.
     pub version: u64,
@@ -22,8 +25,10 @@ pub struct ParameterSet {
 impl ParameterSet {
     /// Wraps loaded parameters with their version and source.
     pub fn new(params: RobotParams, version: u64, path: &Path) -> Self {
+        let geometry = params.effective_geometry();
         Self {
-            geometry: params.effective_geometry(),
+            realtime: RealtimeGeometry::from(&geometry),
+            geometry,
             params,
             version,
             path: path.to_owned(),

@@ -1,9 +1,9 @@
 //! The IK answer to one request, with the parameter set in service.
 
 use crate::parameter_set::ParameterSet;
-use nalgebra::{Point3, Vector3};
+use glam::DVec3;
 use sabr_model::ParamsFileError;
-use sabr_model::{inverse, JointMotion, KinematicsError};
+use sabr_model::{JointMotion, KinematicsError};
 use sabr_msgs::{FixedString, IkRequest, IkResponse, IkStatus, ParameterSetAnnouncement};
 use std::path::Path;
 
@@ -119,20 +119,21 @@ impl IkSolver {
         if !request.near_joints_rad.iter().all(|v| v.is_finite()) {
             return Err(invalid("the near joints"));
         }
-        let direction = Vector3::from(request.direction);
-        if direction.norm() <= MIN_DIRECTION_NORM {
+        let direction = DVec3::from_array(request.direction);
+        if direction.length() <= MIN_DIRECTION_NORM {
             return Err((
                 IkStatus::InvalidInput,
                 "the needle direction has zero length".into(),
             ));
         }
-        let tip = Point3::from(request.tip_mm);
-        let joints = inverse(&set.geometry, &tip, &direction, &request.near_joints_rad).map_err(
-            |error| match error {
+        let tip = DVec3::from_array(request.tip_mm);
+        let joints = set
+            .realtime
+            .inverse(tip, direction, &request.near_joints_rad)
+            .map_err(|error| match error {
                 KinematicsError::NotFinite(_) => (IkStatus::InvalidInput, error.to_string()),
                 KinematicsError::Unreachable(_) => (IkStatus::Unreachable, error.to_string()),
-            },
-        )?;
+            })?;
         let counts = set
             .params
             .counts_from_joints(&joints, &JointMotion::default())
@@ -144,7 +145,8 @@ impl IkSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sabr_model::{forward, RobotParams, HOME_JOINTS};
+    use sabr_model::realtime::RealtimeGeometry;
+    use sabr_model::{forward, inverse, RobotParams, HOME_JOINTS};
 
     fn calibrated() -> RobotParams {
         let mut params = RobotParams::nominal();
@@ -171,6 +173,7 @@ mod tests {
     fn reachable_targets_match_the_model_library_exactly() {
         let params = calibrated();
         let geometry = params.effective_geometry();
+        let realtime = RealtimeGeometry::from(&geometry);
         let solver = solver(params.clone());
         for q in [
             HOME_JOINTS,
@@ -183,8 +186,14 @@ mod tests {
             assert_eq!(response.status, IkStatus::Ok, "{}", response.error);
             assert_eq!(response.id, 17);
             assert_eq!(response.parameter_version, 3);
-            let expected = inverse(&geometry, &pose.tip, &pose.direction, &HOME_JOINTS).unwrap();
+            let tip = DVec3::from_array(pose.tip.coords.into());
+            let direction = DVec3::from_array(pose.direction.into_inner().into());
+            let expected = realtime.inverse(tip, direction, &HOME_JOINTS).unwrap();
             assert_eq!(response.joints_rad, expected);
+            let nalgebra = inverse(&geometry, &pose.tip, &pose.direction, &HOME_JOINTS).unwrap();
+            for (a, b) in expected.iter().zip(&nalgebra) {
+                assert!((a - b).abs() < 1e-9, "glam {a} vs nalgebra {b}");
+            }
             let counts = params
                 .counts_from_joints(&expected, &JointMotion::default())
                 .unwrap();

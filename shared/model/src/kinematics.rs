@@ -1,7 +1,6 @@
 //! Forward and inverse kinematics (docs/robot-model.md §3–§4). All poses in `Bb`, mm and rad.
-
-use std::borrow::Cow;
-use std::f64::consts::TAU;
+//! [`forward`] and [`inverse`] work on nalgebra types (the calibration's); [`realtime`] is the
+//! same kinematics on glam's f64 types for the paths that run at 1–2 kHz.
 
 use nalgebra::{
     Isometry3, Matrix3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3,
@@ -9,19 +8,21 @@ use nalgebra::{
 
 use crate::{Geometry, Joints, MarkerPoses, RobotParams};
 
+pub mod realtime;
 mod roll;
+mod scalar;
 mod stage;
 
+use scalar::{
+    check_finite_joints, check_gimbal_distance, check_gimbal_normal, check_inverse_inputs,
+    front_plane_crossing, front_stage_unreachable, refine_tilted, Candidates,
+    IK_DIRECTION_TOLERANCE, IK_TIP_TOLERANCE_MM, ON_ROLL_AXIS, WRONG_SIDE,
+};
 use stage::FiveBar;
 
 /// The home pose of docs/robot-model.md §3 (needle along +z, tip at (0, −90, 180) mm in `Bb`):
 /// joint angles θ1..θ5 (rad). A good `near` for [`inverse`] when nothing better is known.
 pub const HOME_JOINTS: Joints = [-2.368404, -0.777628, 0.0, -2.685073, -0.601543];
-
-/// Largest tip error (mm) at which an IK candidate counts as reproducing the target.
-const IK_TIP_TOLERANCE_MM: f64 = 1e-6;
-/// Largest needle-direction error (unit vector difference) of an accepted IK candidate.
-const IK_DIRECTION_TOLERANCE: f64 = 1e-8;
 
 /// The result of forward kinematics: needle and effector poses in `Bb`.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,14 +63,6 @@ struct NeedleChain {
     axes: [Vector3<f64>; 3],
     /// Tip `p_n`.
     tip: Vector3<f64>,
-}
-
-fn check_finite_joints(q: &Joints, what: &'static str) -> Result<(), KinematicsError> {
-    if q.iter().all(|v| v.is_finite()) {
-        Ok(())
-    } else {
-        Err(KinematicsError::NotFinite(what))
-    }
 }
 
 /// The tilt of a stage joint's axis (z of its stage plane): `Rx(tilt[0])·Ry(tilt[1])`.
@@ -126,19 +119,11 @@ fn needle_chain(geometry: &Geometry, q: &Joints) -> Result<NeedleChain, Kinemati
     let d = geometry.d_offset;
     let to_front = p_f.coords - p_b;
     let distance = to_front.norm();
-    if distance.is_nan() || distance <= d {
-        return Err(KinematicsError::Unreachable(format!(
-            "the gimbal centres are {distance} mm apart, not more than d_offset = {d} mm"
-        )));
-    }
+    check_gimbal_distance(distance, d)?;
     let e = to_front / distance;
     let normal = a_b.cross(&e);
     let normal_norm = normal.norm();
-    if normal_norm.is_nan() || normal_norm <= 1e-12 {
-        return Err(KinematicsError::Unreachable(
-            "the line between the gimbal centres is parallel to the back gimbal axis".into(),
-        ));
-    }
+    check_gimbal_normal(normal_norm)?;
     let n = normal / normal_norm;
     let e_perp = n.cross(&e);
     let cos_alpha = d / distance;
@@ -198,18 +183,6 @@ pub fn forward(geometry: &Geometry, q: &Joints) -> Result<NeedlePose, Kinematics
     })
 }
 
-/// A joint-vector candidate of the inverse kinematics and its squared distance to `near`.
-#[derive(Clone, Copy)]
-struct Candidate {
-    q: Joints,
-    distance: f64,
-}
-
-/// Wraps `angle` (rad) to within π of `reference`.
-fn wrap_near(angle: f64, reference: f64) -> f64 {
-    angle - TAU * ((angle - reference) / TAU).round()
-}
-
 /// Inverse kinematics: tip `p_n` (mm, `Bb`) and needle direction `z_N` → joints, the
 /// solution nearest `near` (wrapped to within π of it). Unreachable targets are an error.
 ///
@@ -221,19 +194,7 @@ pub fn inverse(
     direction: &Vector3<f64>,
     near: &Joints,
 ) -> Result<Joints, KinematicsError> {
-    if !tip.coords.iter().all(|v| v.is_finite()) {
-        return Err(KinematicsError::NotFinite("tip"));
-    }
-    if !direction.iter().all(|v| v.is_finite()) {
-        return Err(KinematicsError::NotFinite("needle direction"));
-    }
-    check_finite_joints(near, "near joints")?;
-    let length = direction.norm();
-    if length <= 1e-12 || length.is_infinite() {
-        return Err(KinematicsError::Unreachable(format!(
-            "the needle direction has no usable length ({length})"
-        )));
-    }
+    let length = check_inverse_inputs(&tip.coords.into(), &(*direction).into(), near)?;
     let z = direction / length;
     if geometry.axis_tilt != [[0.0; 2]; 5] {
         return inverse_tilted(geometry, tip, &z, near);
@@ -244,82 +205,39 @@ pub fn inverse(
     let to_front = geometry.front_base.inverse();
     let origin = to_front * Point3::from(p_r);
     let along = to_front.rotation * z;
-    if along.z.abs() < 1e-9 {
-        return Err(KinematicsError::Unreachable(
-            "the needle is parallel to the front stage plane".into(),
-        ));
-    }
-    let t = -origin.z / along.z;
-    if t.is_nan() || t <= 0.0 {
-        return Err(KinematicsError::Unreachable(format!(
-            "the needle line meets the front stage plane {:.3} mm behind p_r (it must be ahead)",
-            -t
-        )));
-    }
+    let t = front_plane_crossing(origin.z, along.z)?;
     let front_point = (origin.x + t * along.x, origin.y + t * along.y);
     let front = FiveBar::front(geometry)
         .inverse(front_point.0, front_point.1)
-        .map_err(|reason| KinematicsError::Unreachable(format!("front 5-bar: {reason}")))?;
+        .map_err(front_stage_unreachable)?;
     let p_f = p_r + t * z;
 
     let back_stage = FiveBar::back(geometry);
     let d = geometry.d_offset;
-    let mut candidates = [Candidate {
-        q: [0.0; 5],
-        distance: f64::INFINITY,
-    }; roll::MAX_ROOTS * 4];
-    let mut count = 0;
-    let mut last_failure: Cow<'static, str> =
-        "no needle roll puts the back gimbal axis in the needle plane".into();
-    for v in roll::gimbal_plane_directions(&p_r, &z, d).iter() {
+    let mut candidates = Candidates::new(near);
+    for &v in roll::gimbal_plane_directions(&p_r.into(), &z.into(), d).iter() {
+        let v = Vector3::from(v);
         let p_b = p_r + d * v;
         let radius = p_b.y.hypot(p_b.z);
         if radius.is_nan() || radius <= 1e-9 {
-            last_failure = "the back gimbal centre would lie on the θ3 axis".into();
+            candidates.refuse(ON_ROLL_AXIS);
             continue;
         }
         let a_b = Vector3::new(0.0, -p_b.y / radius, -p_b.z / radius);
         // Forward kinematics picks the perpendicular foot with x_N·n > 0; keep only rolls
         // that agree with it.
         if v.cross(&z).dot(&a_b.cross(&(p_f - p_b))) <= 0.0 {
-            last_failure = "the needle lies on the wrong side of the back gimbal".into();
+            candidates.refuse(WRONG_SIDE);
             continue;
         }
         let theta3 = (-p_b.z).atan2(-p_b.y);
-        let back = match back_stage.inverse(p_b.x, -radius) {
-            Ok(back) => back,
-            Err(reason) => {
-                last_failure = format!("back 5-bar: {reason}").into();
-                continue;
-            }
-        };
-        for &(theta4, theta5) in &back {
-            for &(theta1, theta2) in &front {
-                let raw = [theta1, theta2, theta3, theta4, theta5];
-                let q: Joints = std::array::from_fn(|i| wrap_near(raw[i], near[i]));
-                let distance = q.iter().zip(near).map(|(a, b)| (a - b) * (a - b)).sum();
-                candidates[count] = Candidate { q, distance };
-                count += 1;
-            }
+        match back_stage.inverse(p_b.x, -radius) {
+            Ok(back) => candidates.add(theta3, &back, &front),
+            Err(reason) => candidates.refuse_back(reason),
         }
     }
-    let candidates = &mut candidates[..count];
-    candidates.sort_unstable_by(|a, b| a.distance.total_cmp(&b.distance));
-    for candidate in candidates.iter() {
-        if reproduces(geometry, &candidate.q, &tip.coords, &z) {
-            return Ok(candidate.q);
-        }
-    }
-    if !candidates.is_empty() {
-        last_failure = "no candidate solution reproduces the target (singular pose)".into();
-    }
-    Err(KinematicsError::Unreachable(last_failure.into_owned()))
+    candidates.nearest(|q| reproduces(geometry, q, &tip.coords, &z))
 }
-
-/// Newton steps of the inverse kinematics with tilted joint axes.
-const TILTED_IK_ITERATIONS: usize = 30;
-/// Joint step (rad) of the finite differences of the tilted inverse kinematics.
-const TILTED_IK_STEP: f64 = 1e-7;
 
 /// Inverse kinematics with tilted joint axes (§4): the closed-form solution of the untilted
 /// geometry, refined by Newton steps on the tip (3 equations) and the needle direction (its
@@ -332,7 +250,7 @@ fn inverse_tilted(
 ) -> Result<Joints, KinematicsError> {
     let mut untilted = geometry.clone();
     untilted.axis_tilt = [[0.0; 2]; 5];
-    let mut q = inverse(&untilted, tip, z, near)?;
+    let q = inverse(&untilted, tip, z, near)?;
     let across = z.cross(&Vector3::x());
     let first = if across.norm() > 0.1 {
         across.normalize()
@@ -340,48 +258,13 @@ fn inverse_tilted(
         z.cross(&Vector3::y()).normalize()
     };
     let second = z.cross(&first);
-    let equations = |q: &Joints| -> Option<nalgebra::Vector5<f64>> {
+    let equations = |q: &Joints| -> Option<[f64; 5]> {
         let chain = needle_chain(geometry, q).ok()?;
         let d = chain.tip - tip.coords;
         let axis = chain.axes[2];
-        Some(nalgebra::Vector5::new(
-            d.x,
-            d.y,
-            d.z,
-            axis.dot(&first),
-            axis.dot(&second),
-        ))
+        Some([d.x, d.y, d.z, axis.dot(&first), axis.dot(&second)])
     };
-    for _ in 0..TILTED_IK_ITERATIONS {
-        if reproduces(geometry, &q, &tip.coords, z) {
-            return Ok(q);
-        }
-        let f = equations(&q).ok_or_else(|| {
-            KinematicsError::Unreachable("the tilted chain leaves its workspace".into())
-        })?;
-        let mut jacobian = nalgebra::Matrix5::zeros();
-        for j in 0..5 {
-            let mut moved = q;
-            moved[j] += TILTED_IK_STEP;
-            let g = equations(&moved).ok_or_else(|| {
-                KinematicsError::Unreachable("the tilted chain leaves its workspace".into())
-            })?;
-            jacobian.set_column(j, &((g - f) / TILTED_IK_STEP));
-        }
-        let step = jacobian.lu().solve(&(-f)).ok_or_else(|| {
-            KinematicsError::Unreachable("singular pose of the tilted chain".into())
-        })?;
-        for (value, delta) in q.iter_mut().zip(step.iter()) {
-            *value += delta;
-        }
-    }
-    if reproduces(geometry, &q, &tip.coords, z) {
-        Ok(q)
-    } else {
-        Err(KinematicsError::Unreachable(format!(
-            "no joint vector of the tilted chain reproduces the target within              {TILTED_IK_ITERATIONS} Newton steps"
-        )))
-    }
+    refine_tilted(q, equations, |q| reproduces(geometry, q, &tip.coords, z))
 }
 
 /// True when FK of `q` puts the tip within 1e-6 mm of `tip` and the needle along `z`.

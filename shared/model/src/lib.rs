@@ -24,6 +24,7 @@ pub use effects::{
     DirectionTracker, Effect, EffectField, EncoderScale, JointMotion, Link,
     DIRECTION_DEAD_BAND_COUNTS,
 };
+pub use kinematics::realtime;
 pub use kinematics::{forward, inverse, KinematicsError, NeedlePose, HOME_JOINTS};
 pub use params::{
     CalibrationInfo, Geometry, JointCalibration, MarkerMounts, MarkerPoses, ParamsError,

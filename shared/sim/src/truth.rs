@@ -10,6 +10,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sabr_model::effects::{apply_joint_effects, EncoderScale, JointMotion};
 use sabr_model::plan::{SessionPlan, EXCITATION_AMPLITUDE};
+use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::Effect;
 use sabr_model::{
     forward, inverse, Counts, Geometry, Joints, KinematicsError, NeedlePose, RobotParams,
@@ -397,6 +398,8 @@ pub fn quantise_counts(motor: &Joints, counts_per_rev: &[u32; 5]) -> Counts {
 pub struct TrueRobot {
     truth: RobotTruth,
     geometry: Geometry,
+    /// `geometry` prepared for the real-time kinematics of every tick.
+    realtime: RealtimeGeometry,
     motor: Joints,
     t_ns: i64,
     /// The injected joint-side effects other than backlash.
@@ -440,6 +443,7 @@ impl TrueRobot {
             play_output: truth.paper_joints(&motor),
             scale: truth.params.encoder_scale(),
             truth,
+            realtime: RealtimeGeometry::from(&geometry),
             geometry,
             motor,
             t_ns: 0,
@@ -531,9 +535,15 @@ impl TrueRobot {
     }
 
     /// Needle and effector poses in `Bb` of a rigid needle (no sag): FK of the true joints
-    /// with the true geometry at the current time.
+    /// with the true geometry at the current time (the real-time kinematics; a geometry with
+    /// link drifts is prepared anew at each call).
     pub fn rigid_pose(&self) -> Result<NeedlePose, KinematicsError> {
-        forward(&self.geometry(), &self.joints())
+        let joints = self.joints();
+        let pose = match self.geometry() {
+            Cow::Borrowed(_) => self.realtime.forward(&joints)?,
+            Cow::Owned(drifted) => RealtimeGeometry::from(&drifted).forward(&joints)?,
+        };
+        Ok(pose.to_nalgebra())
     }
 
     /// True geometry at the current time (mm): the truth's effective geometry (link-length

@@ -9,10 +9,10 @@
 //! linear part (amplitude ≈ |P·p_r| ≈ 90 mm) dominates the quadratic part (≤ d_offset), so
 //! the two roots are about π apart; roots closer than 2π/[`SAMPLES`] (a near-singular,
 //! far-outside pose) may be missed, which makes such a target unreachable, never wrong.
+//!
+//! Vectors are `[x, y, z]` arrays so that the nalgebra and the glam kinematics share this code.
 
 use std::f64::consts::TAU;
-
-use nalgebra::Vector3;
 
 /// Largest number of roots of a degree-2 trigonometric polynomial.
 pub(super) const MAX_ROOTS: usize = 4;
@@ -79,19 +79,34 @@ impl PlaneCondition {
     }
 }
 
+/// A vector `[x, y, z]` (`Bb`).
+type Vector = [f64; 3];
+
+fn dot(a: &Vector, b: &Vector) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: &Vector, b: &Vector) -> Vector {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 /// Up to [`MAX_ROOTS`] unit vectors `v`.
 pub(super) struct Directions {
-    items: [Vector3<f64>; MAX_ROOTS],
+    items: [Vector; MAX_ROOTS],
     len: usize,
 }
 
 impl Directions {
-    /// The directions found.
-    pub(super) fn iter(&self) -> impl Iterator<Item = &Vector3<f64>> {
+    /// The directions found, `[x, y, z]` in `Bb`.
+    pub(super) fn iter(&self) -> impl Iterator<Item = &[f64; 3]> {
         self.items[..self.len].iter()
     }
 
-    fn push(&mut self, v: Vector3<f64>) {
+    fn push(&mut self, v: Vector) {
         if self.len < MAX_ROOTS {
             self.items[self.len] = v;
             self.len += 1;
@@ -100,39 +115,38 @@ impl Directions {
 }
 
 /// An orthonormal pair `e1, e2` with `e1 × e2 = z` (z a unit vector).
-fn perpendicular_basis(z: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let helper = if z.x.abs() < 0.9 {
-        Vector3::x()
+fn perpendicular_basis(z: &Vector) -> (Vector, Vector) {
+    let helper = if z[0].abs() < 0.9 {
+        [1.0, 0.0, 0.0]
     } else {
-        Vector3::y()
+        [0.0, 1.0, 0.0]
     };
-    let e1 = (helper - helper.dot(z) * z).normalize();
-    (e1, z.cross(&e1))
+    let along = dot(&helper, z);
+    let e1: Vector = std::array::from_fn(|i| helper[i] - along * z[i]);
+    let norm = dot(&e1, &e1).sqrt();
+    let e1 = e1.map(|v| v / norm);
+    (e1, cross(z, &e1))
 }
 
 /// All directions `v ⊥ z` (unit) for which `p_b = p_r + offset·v` satisfies the gimbal plane
 /// condition. `p_r` in mm (`Bb`), `z` the unit needle direction, `offset` = `d_offset` (mm).
-pub(super) fn gimbal_plane_directions(
-    p_r: &Vector3<f64>,
-    z: &Vector3<f64>,
-    offset: f64,
-) -> Directions {
+pub(super) fn gimbal_plane_directions(p_r: &[f64; 3], z: &[f64; 3], offset: f64) -> Directions {
     let (e1, e2) = perpendicular_basis(z);
     // det[z, v, P p_r] = v · (P p_r × z)
-    let k = Vector3::new(0.0, p_r.y, p_r.z).cross(z);
+    let k = cross(&[0.0, p_r[1], p_r[2]], z);
     // det[z, v, P v] = −v_x · v·(x̂ × z)
-    let m = Vector3::new(0.0, -z.z, z.y);
-    let (a1, b1, p1, q1) = (e1.x, e2.x, e1.dot(&m), e2.dot(&m));
+    let m = [0.0, -z[2], z[1]];
+    let (a1, b1, p1, q1) = (e1[0], e2[0], dot(&e1, &m), dot(&e2, &m));
     let condition = PlaneCondition {
-        a: e1.dot(&k),
-        b: e2.dot(&k),
+        a: dot(&e1, &k),
+        b: dot(&e2, &k),
         c: -offset * a1 * p1,
         d: -offset * (a1 * q1 + b1 * p1),
         e: -offset * b1 * q1,
     };
 
     let mut roots = Directions {
-        items: [Vector3::zeros(); MAX_ROOTS],
+        items: [[0.0; 3]; MAX_ROOTS],
         len: 0,
     };
     let step = TAU / SAMPLES as f64;
@@ -155,7 +169,7 @@ pub(super) fn gimbal_plane_directions(
         };
         if let Some(phi) = phi {
             let (s, c) = phi.sin_cos();
-            roots.push(c * e1 + s * e2);
+            roots.push(std::array::from_fn(|i| c * e1[i] + s * e2[i]));
         }
         (cos, sin, value) = (next_cos, next_sin, next_value);
     }
@@ -165,20 +179,23 @@ pub(super) fn gimbal_plane_directions(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Vector3;
 
     /// At home (needle along +z, p_r = (0, −90, 0), d_offset = 20) the condition is
     /// `v_x (−90 + 20 v_y) = 0`: exactly the two rolls v = (0, ±1, 0).
     #[test]
     fn home_has_the_two_vertical_rolls() {
-        let roots = gimbal_plane_directions(&Vector3::new(0.0, -90.0, 0.0), &Vector3::z(), 20.0);
-        let mut ys: Vec<f64> = roots.iter().map(|v| v.y).collect();
+        let roots = gimbal_plane_directions(&[0.0, -90.0, 0.0], &[0.0, 0.0, 1.0], 20.0);
+        let mut ys: Vec<f64> = roots.iter().map(|v| v[1]).collect();
         ys.sort_by(f64::total_cmp);
         assert_eq!(ys.len(), 2);
         assert!(
             (ys[0] + 1.0).abs() < 1e-12 && (ys[1] - 1.0).abs() < 1e-12,
             "{ys:?}"
         );
-        assert!(roots.iter().all(|v| v.x.abs() < 1e-12 && v.z.abs() < 1e-12));
+        assert!(roots
+            .iter()
+            .all(|v| v[0].abs() < 1e-12 && v[2].abs() < 1e-12));
     }
 
     /// Every root found satisfies the plane condition det[z, v, P(p_r + d v)] = 0 and is ⊥ z.
@@ -186,9 +203,10 @@ mod tests {
     fn roots_satisfy_the_plane_condition() {
         let z = Vector3::new(0.1, -0.2, 0.97).normalize();
         let p_r = Vector3::new(4.0, -80.0, 6.0);
-        let roots = gimbal_plane_directions(&p_r, &z, 20.0);
+        let roots = gimbal_plane_directions(&p_r.into(), &z.into(), 20.0);
         assert!(roots.iter().count() >= 2);
-        for v in roots.iter() {
+        for &v in roots.iter() {
+            let v = Vector3::from(v);
             let p_b = p_r + 20.0 * v;
             let projected = Vector3::new(0.0, p_b.y, p_b.z);
             let det = z.dot(&v.cross(&projected));

@@ -7,6 +7,7 @@ use crate::Geometry;
 
 /// One stage: proximal link `l` on joint θp, distal link `l` plus the effector extension `l_e`
 /// at −45° on joint θd. Lengths in mm.
+#[derive(Debug, Clone)]
 pub(super) struct FiveBar {
     l: f64,
     l_e: f64,
