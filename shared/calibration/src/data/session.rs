@@ -68,8 +68,8 @@ impl SessionData {
     /// Synchronises `recording`: its tracker frames in `Bb` (tools relative to the base
     /// marker, moved with `robot`'s fixture pose), the clock line through their counters and
     /// host stamps (`tracker.csv`'s `t_ns`: when each frame became available at the tracker,
-    /// as the live `sync` stamps them; a format v1 recording's arrival stamps), and the encoder track (gaps longer than `max_encoder_gap_ns` are not
-    /// interpolated across).
+    /// as the live `sync` stamps them; a format v1 recording's arrival stamps), and the
+    /// encoder track (gaps longer than `max_encoder_gap_ns` are not interpolated across).
     pub fn synchronise(
         recording: &Recording,
         robot: &RobotParams,
