@@ -147,6 +147,7 @@ impl Feedback {
                             .send(TrackerFrame {
                                 seq: seq / 50,
                                 arrival_t_ns: t_ns,
+                                available_t_ns: t_ns,
                                 ..TrackerFrame::default()
                             })
                             .unwrap();

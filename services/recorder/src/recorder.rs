@@ -240,7 +240,8 @@ mod tests {
         };
         TrackerFrame {
             seq: u64::from(frame_number),
-            arrival_t_ns: 50_000_000 * i64::from(frame_number),
+            arrival_t_ns: 50_000_000 * i64::from(frame_number) + 600_000,
+            available_t_ns: 50_000_000 * i64::from(frame_number),
             frame_number,
             tools,
         }
@@ -291,7 +292,10 @@ mod tests {
                 rms: 0.0
             }
         );
-        assert_eq!(recording.tracker[3].t_ns, 350_000_000);
+        assert_eq!(
+            (recording.tracker[3].t_ns, recording.tracker[3].arrival_t_ns),
+            (350_000_000, 350_600_000)
+        );
         assert_eq!(recording.phases[0].phase, "excitation");
     }
 
@@ -371,7 +375,7 @@ mod tests {
         recorder.flush().unwrap();
         // A frame stamped before the previous one: in tracker.csv, but not on the MCAP topic.
         let mut early = frame(1);
-        early.arrival_t_ns -= 1;
+        early.available_t_ns -= 1;
         recorder.frame(&early).unwrap();
         let stats = recorder.finish().unwrap();
         assert_eq!(stats.mcap_refused, 1);

@@ -1,5 +1,6 @@
 //! The tracker's exposure clock, estimated online: a robust line through the tracker's frame
-//! counter and the host arrival stamps of the most recent frames.
+//! counter and the host stamps of the most recent frames (the matcher feeds the estimated time
+//! each frame became available at the device; "arrival" below means that stamp).
 //!
 //! The line is the engine's [`ClockLine`], the one the calibrator fits offline over a whole
 //! recording (`sabr_calibration::data::clock::ClockFit`): the slope starts at the median
@@ -160,7 +161,8 @@ impl FrameClock {
         self.restarts
     }
 
-    /// Adds a frame (its counter and host arrival time, ns) and returns the line at it.
+    /// Adds a frame (its counter and host time stamp, `CLOCK_MONOTONIC` ns: the matcher passes
+    /// its availability stamp) and returns the line at it.
     pub fn observe(&mut self, frame_number: u32, arrival_ns: i64) -> Observed {
         let mut restart = None;
         let tick = match (self.last_counter, self.points.back()) {

@@ -2,7 +2,8 @@
 //! state at the frame's exposure time.
 //!
 //! - [`clock::FrameClock`]: online robust line through the tracker's frame counter and the host
-//!   arrival stamps: the engine's clock line (`sabr_calibration::data::clock::ClockLine`,
+//!   stamps of when each frame became available at the device (`TrackerFrame::available_t_ns`,
+//!   not the later arrival of the reply): the engine's clock line (`sabr_calibration::data::clock::ClockLine`,
 //!   Huber IRLS; robust to skipped frames, counter steps ≠ 1, jitter and late frames) over a
 //!   sliding window. `exposure = line − latency`, the same definition of the latency
 //!   as the calibrator's.

@@ -1,7 +1,10 @@
 //! Pairs tracker frames with the encoder state at their exposure time.
 //!
 //! Each frame's exposure time is the frame clock line at its counter ([`crate::clock`]) minus
-//! the tracker latency; the encoder counts are interpolated there ([`crate::encoder_buffer`]).
+//! the tracker latency. The line is fitted through the frames' availability stamps
+//! ([`TrackerFrame::available_t_ns`]: when the frame became available at the device, which is
+//! what the latency is measured to), not through the arrival of the replies, which are later by
+//! the wait for the next poll and one serial exchange; the encoder counts are interpolated there ([`crate::encoder_buffer`]).
 //! A frame waits until the first encoder sample after its exposure has arrived, at most
 //! [`MatcherConfig::match_timeout_ns`]. Frames are matched in arrival order.
 
@@ -180,7 +183,7 @@ impl Matcher {
     /// matched, but it lets the clock lock without waiting for new frames. Returns what the
     /// frame did to the clock.
     pub fn learn_clock(&mut self, frame: TrackerFrame) -> Observed {
-        let observed = self.clock.observe(frame.frame_number, frame.arrival_t_ns);
+        let observed = self.clock.observe(frame.frame_number, frame.available_t_ns);
         if let Observed::Estimate(estimate) = observed {
             self.last_clock = Some(estimate);
         }
@@ -215,7 +218,7 @@ impl Matcher {
         latency: Option<Latency>,
         now_ns: i64,
     ) -> Result<(), Unmatched> {
-        let clock = match self.clock.observe(frame.frame_number, frame.arrival_t_ns) {
+        let clock = match self.clock.observe(frame.frame_number, frame.available_t_ns) {
             Observed::Repeated => return Err(Unmatched::Repeated),
             Observed::Learning { frames, restart } => {
                 self.locked = false;
@@ -290,6 +293,7 @@ impl Matcher {
             seq: self.seq,
             exposure_t_ns: pending.exposure_ns,
             arrival_t_ns: pending.frame.arrival_t_ns,
+            available_t_ns: pending.frame.available_t_ns,
             frame_number: pending.frame.frame_number,
             counts: found.counts,
             encoder_angle_rad: std::array::from_fn(|j| TAU * found.counts[j] / f64::from(cpr[j])),
@@ -318,10 +322,18 @@ mod tests {
         source: LatencySource::Configured,
     };
 
-    fn frame(counter: u32, arrival_ns: i64) -> TrackerFrame {
+    /// Wait of a reply for the next poll plus one serial exchange in the synthetic frames, ns:
+    /// the arrival stamp is this much later than the availability stamp.
+    const REPLY_DELAY_NS: i64 = 700_000;
+
+    /// A frame that became available at the device at `available_ns` (the synthetic streams'
+    /// `arrival_ns`, drawn from exposure + latency + jitter) and arrived [`REPLY_DELAY_NS`]
+    /// later.
+    fn frame(counter: u32, available_ns: i64) -> TrackerFrame {
         TrackerFrame {
             seq: 0,
-            arrival_t_ns: arrival_ns,
+            arrival_t_ns: available_ns + REPLY_DELAY_NS,
+            available_t_ns: available_ns,
             frame_number: counter,
             tools: Default::default(),
         }
@@ -393,6 +405,60 @@ mod tests {
         }
         let seqs: Vec<u64> = matched.iter().map(|(m, _)| m.seq).collect();
         assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
+    }
+
+    #[test]
+    fn the_clock_line_runs_through_the_availability_stamps_not_the_arrivals() {
+        // Every frame arrives REPLY_DELAY_NS after it became available; the latency is
+        // measured to availability, so the exposures carry no bias of that size.
+        let (matched, _) = session(3, 60);
+        let mean_error = matched
+            .iter()
+            .map(|(m, truth)| (m.exposure_t_ns - truth) as f64)
+            .sum::<f64>()
+            / matched.len() as f64;
+        assert!(
+            mean_error.abs() < 0.2 * REPLY_DELAY_NS as f64,
+            "mean exposure error {mean_error} ns"
+        );
+        for (m, _) in &matched {
+            assert_eq!(m.arrival_t_ns - m.available_t_ns, REPLY_DELAY_NS);
+        }
+        // The same frames with other arrival stamps (up to 5 ms late, varying) match at the
+        // same exposures: the arrival stamp takes no part in the timing.
+        let exposures = |late_ns: fn(u32) -> i64| {
+            let config = MatcherConfig {
+                clock: ClockConfig {
+                    min_frames: 3,
+                    ..ClockConfig::default()
+                },
+                max_uncertainty_ns: f64::INFINITY,
+                ..MatcherConfig::default()
+            };
+            let mut matcher = Matcher::new(config, [2000; 5]);
+            for sample in encoder_samples(0, 1_000_000, 700, 0) {
+                matcher.push_encoder(sample);
+            }
+            let mut exposures = Vec::new();
+            for k in 0..12u32 {
+                let available = 60_000_000 + 50_000_000 * i64::from(k) + 1_000 * i64::from(k % 3);
+                let mut frame = frame(k, available);
+                frame.arrival_t_ns = available + late_ns(k);
+                let _ = matcher.push_frame(frame, Some(LATENCY), frame.arrival_t_ns);
+                matcher.poll(700_000_000, |r| {
+                    if let Ok(m) = r {
+                        exposures.push((m.frame_number, m.exposure_t_ns, m.available_t_ns));
+                    }
+                });
+            }
+            exposures
+        };
+        let on_time = exposures(|_| 0);
+        assert_eq!(on_time.len(), 10, "{on_time:?}");
+        assert_eq!(
+            on_time,
+            exposures(|k| 100_000 + 450_000 * i64::from(k % 11))
+        );
     }
 
     #[test]

@@ -35,17 +35,19 @@ const MEAN_DIFFERENCE_NS: f64 = 100_000.0;
 /// Largest gap the engine's encoder track interpolates across (ns), as `sabr calibrate`.
 const MAX_ENCODER_GAP_NS: i64 = 5_000_000;
 
-/// The tracker frames of a recording (rows grouped by frame counter and arrival), in order.
+/// The tracker frames of a recording (rows grouped by frame counter and stamp), in order,
+/// stamped as the tracker node does: `t_ns` is the availability, `arrival_t_ns` the arrival.
 fn tracker_frames(recording: &Recording) -> Vec<TrackerFrame> {
     let mut frames: Vec<TrackerFrame> = Vec::new();
     for row in &recording.tracker {
         let same = frames
             .last()
-            .is_some_and(|f| f.frame_number == row.frame && f.arrival_t_ns == row.t_ns);
+            .is_some_and(|f| f.frame_number == row.frame && f.available_t_ns == row.t_ns);
         if !same {
             frames.push(TrackerFrame {
                 seq: frames.len() as u64 + 1,
-                arrival_t_ns: row.t_ns,
+                arrival_t_ns: row.arrival_t_ns,
+                available_t_ns: row.t_ns,
                 frame_number: row.frame,
                 tools: Default::default(),
             });

@@ -56,13 +56,15 @@ impl HandleMap {
     }
 }
 
-/// The frame message of a stamped reply: `seq`, the arrival stamp, the device's frame number
-/// and each tool's reading (a tool whose handle is not in the reply is `Disabled`).
+/// The frame message of a stamped reply: `seq`, the arrival stamp, the estimated time the frame
+/// became available at the device, the device's frame number and each tool's reading (a tool
+/// whose handle is not in the reply is `Disabled`).
 pub fn tracker_frame(seq: u64, stamped: &Stamped, map: &HandleMap) -> TrackerFrame {
     let reply = &stamped.reply;
     TrackerFrame {
         seq,
         arrival_t_ns: stamped.arrival_ns,
+        available_t_ns: stamped.available_ns,
         frame_number: reply.frame().unwrap_or(0),
         tools: Tool::ALL.map(|tool| tool_sample(tool, reply.handle(map.handle(tool)))),
     }
@@ -117,6 +119,8 @@ mod tests {
         Stamped {
             arrival: Instant::now(),
             arrival_ns: 123_456_789,
+            available_ns: 122_956_789,
+            available_half_width_ns: 500_000,
             reply: TrackingReply {
                 options: ReplyOptions::TRANSFORMS,
                 handles,
@@ -146,8 +150,13 @@ mod tests {
         ]);
         let frame = tracker_frame(7, &reply, &HandleMap::default());
         assert_eq!(
-            (frame.seq, frame.arrival_t_ns, frame.frame_number),
-            (7, 123_456_789, 42)
+            (
+                frame.seq,
+                frame.arrival_t_ns,
+                frame.available_t_ns,
+                frame.frame_number
+            ),
+            (7, 123_456_789, 122_956_789, 42)
         );
         let base = frame.tool(Tool::Base);
         assert_eq!(base.status, ToolStatus::Ok);

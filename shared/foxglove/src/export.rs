@@ -1,4 +1,4 @@
-//! A whole recording (format v1) written as one MCAP file, every message at its row's time
+//! A whole recording (format v2, or v1) written as one MCAP file, every message at its row's time
 //! stamp and all topics interleaved in time order.
 
 use std::collections::BTreeMap;

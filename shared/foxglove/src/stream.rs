@@ -218,8 +218,8 @@ impl<W: Write + Seek> SessionStream<W> {
         self.sink.finish()
     }
 
-    /// The model against one tracker frame, at its exposure (arrival minus the calibrated
-    /// latency, counts interpolated between the encoder samples around it), relative to the
+    /// The model against one tracker frame, at its exposure (its `t_ns`, when it became
+    /// available at the tracker, minus the calibrated latency, counts interpolated between the encoder samples around it), relative to the
     /// base marker. The backlash direction is the one at the latest encoder sample, a few tens
     /// of ms later: it differs only right at a reversal.
     fn residual(&self, rows: &[TrackerRow], first: &TrackerRow, time: Time) -> MarkerResidual {

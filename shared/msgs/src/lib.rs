@@ -2,7 +2,7 @@
 //! service names of the SABR process graph.
 //!
 //! Every message is `#[repr(C)]`, `Copy`, and derives [`ZeroCopySend`] with a stable type name
-//! (`sabr.<Type>.v1`) so that processes built separately agree on the layout; changing a layout
+//! (`sabr.<Type>.v<N>`) so that processes built separately agree on the layout; changing a layout
 //! means bumping the version in the type name. Times `t_ns` are host `CLOCK_MONOTONIC` in
 //! nanoseconds (the same clock as the recording format), lengths are millimetres and angles
 //! radians, as in `docs/robot-model.md`.

@@ -101,12 +101,18 @@ impl ToolSample {
 /// One tracker frame as received by `tracker` (20 Hz on a Polaris Vicra).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.TrackerFrame.v1")]
+#[type_name("sabr.TrackerFrame.v2")]
 pub struct TrackerFrame {
     /// Sequence number, +1 per published frame.
     pub seq: u64,
-    /// Host `CLOCK_MONOTONIC` time at which the reply arrived, ns (later than the exposure).
+    /// Host `CLOCK_MONOTONIC` time at which the reply carrying the frame arrived, ns (later
+    /// than [`Self::available_t_ns`] by the wait for the next poll and one serial exchange).
     pub arrival_t_ns: i64,
+    /// Estimated host `CLOCK_MONOTONIC` time at which the frame became available at the
+    /// device, ns: the midpoint between the last poll that did not see it and the poll that
+    /// did (within ± half their gap). The exposure is earlier by the device latency; this is
+    /// the stamp `sync` fits its frame clock through.
+    pub available_t_ns: i64,
     /// The tracker's own frame counter.
     pub frame_number: u32,
     /// Per-tool measurements, indexed by [`Tool`] (`tools[Tool::Front as usize]`).
@@ -144,11 +150,11 @@ pub struct MatchQuality {
     pub latency_ns: i64,
     /// Where `latency_ns` came from.
     pub latency_source: LatencySource,
-    /// This frame's arrival time minus the frame clock line, ns (large and positive: a late
-    /// frame).
+    /// This frame's availability stamp ([`TrackerFrame::available_t_ns`]) minus the frame
+    /// clock line, ns (large and positive: a late frame).
     pub clock_residual_ns: i64,
-    /// Robust spread (1.4826 · MAD) of the arrival times about the clock line over the fit
-    /// window, ns: the arrival jitter.
+    /// Robust spread (1.4826 · MAD) of the availability stamps about the clock line over the
+    /// fit window, ns: the stamp jitter.
     pub clock_spread_ns: i64,
     /// Tracker frames in the clock fit window.
     pub clock_frames: u32,
@@ -157,14 +163,18 @@ pub struct MatchQuality {
 /// A tracker frame paired with the encoder state at its exposure time (published by `sync`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.MatchedSample.v2")]
+#[type_name("sabr.MatchedSample.v3")]
 pub struct MatchedSample {
     /// Sequence number, +1 per matched sample.
     pub seq: u64,
     /// Estimated exposure time of the frame, host `CLOCK_MONOTONIC` ns.
     pub exposure_t_ns: i64,
-    /// Arrival time of the frame (as in [`TrackerFrame::arrival_t_ns`]), ns.
+    /// Arrival time of the frame (as in [`TrackerFrame::arrival_t_ns`]), host
+    /// `CLOCK_MONOTONIC` ns.
     pub arrival_t_ns: i64,
+    /// Estimated time the frame became available at the device (as in
+    /// [`TrackerFrame::available_t_ns`]), host `CLOCK_MONOTONIC` ns.
+    pub available_t_ns: i64,
     /// The tracker's frame counter.
     pub frame_number: u32,
     /// Encoder counts of joints 1..5 interpolated to the exposure time.
@@ -196,4 +206,44 @@ pub struct RigTruth {
     pub tip_mm: [f64; 3],
     /// True needle direction `z_N` in `Bb` (unit vector).
     pub direction: [f64; 3],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::size_of;
+
+    /// The type name of message `T` as iceoryx2 sees it.
+    fn type_name<T: ZeroCopySend>() -> &'static str {
+        // SAFETY: reading the name has no precondition; the contract of `type_name` is about
+        // the layouts of the types sharing a name, which this test pins.
+        unsafe { <T as ZeroCopySend>::type_name() }
+    }
+
+    /// Every sensing message's stable type name and size: a layout change shows up here and
+    /// must come with a bumped version in the name.
+    #[test]
+    fn type_names_and_sizes_are_pinned() {
+        let pinned = [
+            (type_name::<EncoderSample>(), size_of::<EncoderSample>()),
+            (type_name::<CounterLatch>(), size_of::<CounterLatch>()),
+            (type_name::<ToolSample>(), size_of::<ToolSample>()),
+            (type_name::<TrackerFrame>(), size_of::<TrackerFrame>()),
+            (type_name::<MatchQuality>(), size_of::<MatchQuality>()),
+            (type_name::<MatchedSample>(), size_of::<MatchedSample>()),
+            (type_name::<RigTruth>(), size_of::<RigTruth>()),
+        ];
+        assert_eq!(
+            pinned,
+            [
+                ("sabr.EncoderSample.v1", 56),
+                ("sabr.CounterLatch.v1", 56),
+                ("sabr.ToolSample.v1", 72),
+                ("sabr.TrackerFrame.v2", 320),
+                ("sabr.MatchQuality.v2", 56),
+                ("sabr.MatchedSample.v3", 464),
+                ("sabr.RigTruth.v1", 152),
+            ]
+        );
+    }
 }

@@ -4,14 +4,25 @@
 //! time-out: serial break, wait for `RESET`, INIT again; on `ERROR0C`, i.e. still tracking from an
 //! earlier session: TSTOP, INIT again), COMM to the configured speed, VER, then PHSR/PINIT for
 //! every occupied port handle and PHSR/PENA for every initialised one, and TSTART. Then
-//! [`NdiDriver::next_frame`] polls BX and returns each new frame stamped on arrival.
+//! [`NdiDriver::next_frame`] polls BX and returns each new frame stamped twice: on the arrival
+//! of the reply, and with an estimate of when the frame became available at the device.
 //! [`NdiDriver::stop`] (or dropping the driver) sends TSTOP.
 //!
 //! Every read has a deadline: a dead tracker is a [`DriverError::Timeout`], a tracker that
 //! answers but whose frame counter stands still is a [`DriverError::Stalled`]. Passive tools that
 //! need their ROM uploaded (PHRQ + PVWR) are not handled: the driver enables what the device
 //! reports as occupied.
+//!
+//! Time stamps: a poll is *sent* once the BX command has been written and flushed to the port
+//! (on a serial port, its last byte has left the host), and its reply *arrives* when its last
+//! byte is read, both on the host `CLOCK_MONOTONIC`. A new frame became available at the device
+//! between the send times of the last answered poll that did not see its frame number yet and
+//! of the poll that saw it; [`Stamped::available_ns`] is the midpoint, within ± half the gap
+//! between those two polls ([`Stamped::available_half_width_ns`]; about ± ½ ms at the 1 ms
+//! poll interval). The first frame after TSTART has no earlier poll: it is stamped with the
+//! send time of the poll that saw it. See [`crate::availability`].
 
+use crate::availability::AvailabilityEstimator;
 use crate::bx::parse_bx_body;
 use crate::command::{Baud, CommSettings, Command, PhsrFilter, TrackingPriority};
 use crate::error::DeviceError;
@@ -123,13 +134,20 @@ pub enum DriverError {
     },
 }
 
-/// A tracking reply stamped on arrival.
+/// A tracking reply stamped on arrival, with the estimated time its frame became available.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stamped {
     /// When the last byte of the reply was read.
     pub arrival: Instant,
     /// The same moment on the host `CLOCK_MONOTONIC` (ns), the clock of every message time stamp.
     pub arrival_ns: i64,
+    /// When the reply's frame became available at the device, estimated from the polls around
+    /// it (module documentation): host `CLOCK_MONOTONIC` ns. The same for every poll that saw
+    /// the same frame number.
+    pub available_ns: i64,
+    /// The error bound of [`Self::available_ns`]: half the gap between the polls bracketing the
+    /// frame, ns (0 for the first frame, whose bracket is unknown).
+    pub available_half_width_ns: i64,
     /// The reply.
     pub reply: TrackingReply,
 }
@@ -169,6 +187,7 @@ pub struct NdiDriver {
     tracking: bool,
     last_frame: Option<u32>,
     last_frame_at: Instant,
+    availability: AvailabilityEstimator,
     stats: DriverStats,
 }
 
@@ -208,6 +227,7 @@ impl NdiDriver {
             tracking: false,
             last_frame: None,
             last_frame_at: Instant::now(),
+            availability: AvailabilityEstimator::new(),
             stats: DriverStats::default(),
         };
         driver.start_up()?;
@@ -302,22 +322,25 @@ impl NdiDriver {
         }
     }
 
-    /// One BX exchange: the current tracking data, stamped on arrival (possibly the same frame
-    /// as the previous poll).
+    /// One BX exchange: the current tracking data, stamped on arrival and with the estimated
+    /// availability of its frame (possibly the same frame as the previous poll).
     pub fn poll(&mut self) -> Result<Stamped, DriverError> {
         let command = Command::Bx(self.config.options);
         self.stats.polls += 1;
-        let (raw, arrival) = self.exchange(&command, self.config.reply_timeout)?;
+        let exchange = self.exchange(&command, self.config.reply_timeout)?;
         let arrival_ns = monotonic_ns();
-        let reply = match raw {
+        let reply = match exchange.reply {
             RawReply::Binary(body) => parse_bx_body(&body, self.config.options),
             RawReply::Text(text) => reject_device_error(&text)
                 .and_then(|text| Err(crate::text::unexpected("a binary BX reply", text))),
         };
         let reply = reply.map_err(|error| self.reply_error(&command.to_string(), error))?;
+        let availability = self.availability.observe(exchange.sent_ns, reply.frame());
         Ok(Stamped {
-            arrival,
+            arrival: exchange.arrival,
             arrival_ns,
+            available_ns: availability.estimate_ns,
+            available_half_width_ns: availability.half_width_ns(),
             reply,
         })
     }
@@ -361,7 +384,7 @@ impl NdiDriver {
         command: &Command,
         timeout: Duration,
     ) -> Result<RawReply, DriverError> {
-        let (raw, _) = self.exchange(command, timeout)?;
+        let raw = self.exchange(command, timeout)?.reply;
         if let RawReply::Text(text) = &raw {
             reject_device_error(text)
                 .map_err(|error| self.reply_error(&command.to_string(), error))?;
@@ -397,11 +420,7 @@ impl NdiDriver {
     }
 
     /// Sends `command` (after dropping stale input) and reads its reply.
-    fn exchange(
-        &mut self,
-        command: &Command,
-        timeout: Duration,
-    ) -> Result<(RawReply, Instant), DriverError> {
+    fn exchange(&mut self, command: &Command, timeout: Duration) -> Result<Exchange, DriverError> {
         let name = command.to_string();
         // The device only speaks when spoken to: anything unread now is stale.
         let _ = self.port.clear(ClearBuffer::Input);
@@ -413,7 +432,13 @@ impl NdiDriver {
                 command: name.clone(),
                 source,
             })?;
-        self.read_reply(&name, timeout)
+        let sent_ns = monotonic_ns();
+        let (reply, arrival) = self.read_reply(&name, timeout)?;
+        Ok(Exchange {
+            reply,
+            sent_ns,
+            arrival,
+        })
     }
 
     /// Reads one reply within `timeout`; garbage before it is counted and skipped.
@@ -487,6 +512,16 @@ impl Drop for NdiDriver {
             let _ = self.acknowledge(&Command::Tstop, timeout);
         }
     }
+}
+
+/// One command and its reply.
+struct Exchange {
+    /// The reply.
+    reply: RawReply,
+    /// When the command had been written and flushed, host `CLOCK_MONOTONIC` ns.
+    sent_ns: i64,
+    /// When the last byte of the reply was read.
+    arrival: Instant,
 }
 
 /// How long the last look at the port waits once a reply's deadline has passed.

@@ -10,11 +10,13 @@
 //!   port-handle lists (PHSR), device errors (`ERRORxx`), `OKAY`.
 //! - [`server`]: the device side, an [`NdiServer`] state machine for the simulated rig, fed by a
 //!   [`FrameSource`]; [`pty`]: a pseudo-terminal to serve it on.
-//! - [`driver`]: the host side, [`NdiDriver`], over a real serial port (or the rig's PTY).
+//! - [`driver`]: the host side, [`NdiDriver`], over a real serial port (or the rig's PTY);
+//!   [`availability`]: when a polled frame became available at the device.
 //!
 //! Units: positions in millimetres in the tracker frame `S`, quaternions (q0, qx, qy, qz) unitless.
 //! Every malformed input is a typed error, never a panic.
 
+pub mod availability;
 pub mod bx;
 pub mod command;
 pub mod crc;
@@ -27,6 +29,7 @@ pub mod server;
 pub mod text;
 pub mod tx;
 
+pub use availability::{Availability, AvailabilityEstimator};
 pub use command::{
     Baud, CommSettings, Command, CommandError, DataBits, Parity, PhsrFilter, StopBits,
     TrackingPriority,

@@ -140,7 +140,13 @@ fn driver_tracks_the_simulated_device_on_a_pty() {
             assert!(step >= 3 && step.is_multiple_of(3), "frame step {step}");
             assert!(stamped.arrival > previous.arrival);
             assert!(stamped.arrival_ns > previous.arrival_ns);
+            // Bracketed by the previous poll (which did not see this frame) and this one.
+            assert!(stamped.available_ns > previous.available_ns);
+            assert!(stamped.available_half_width_ns > 0);
+        } else {
+            assert_eq!(stamped.available_half_width_ns, 0);
         }
+        assert!(stamped.available_ns + stamped.available_half_width_ns < stamped.arrival_ns);
         previous = Some(stamped);
     }
     let stats = driver.stats();

@@ -109,6 +109,17 @@ pub enum Problem {
         /// The previous row's stamp (ns).
         previous_t_ns: i64,
     },
+    /// A tracker row arrived before its frame became available (format v2).
+    #[error(
+        "field `arrival_t_ns`: {arrival_t_ns} is before the frame became available at \
+         t_ns {t_ns}"
+    )]
+    ArrivalBeforeAvailable {
+        /// The availability stamp, `t_ns` (ns).
+        t_ns: i64,
+        /// The arrival stamp (ns).
+        arrival_t_ns: i64,
+    },
     /// A phase ends before it starts.
     #[error("phase ends before it starts: t_end_ns {t_end_ns} < t_start_ns {t_start_ns}")]
     EndBeforeStart {

@@ -18,8 +18,12 @@ pub const ROBOT_TOML: &str = "robot.toml";
 pub trait CsvFormat {
     /// The file's name inside the recording directory.
     const FILE_NAME: &'static str;
-    /// The header's columns, in order. Files may carry extra columns after them.
+    /// The header's columns, in order, as written. Files may carry extra columns after them.
     const COLUMNS: &'static [&'static str];
+    /// The columns of earlier versions of the file that are still read, newest first (a
+    /// header is matched against [`Self::COLUMNS`] first); [`Fields::columns`] tells
+    /// [`Self::parse`] which the file has.
+    const EARLIER_COLUMNS: &'static [&'static [&'static str]] = &[];
     /// One row.
     type Row;
     /// What the rules carry from one row to the next (the previous time stamp).
@@ -78,6 +82,12 @@ impl<'a> Fields<'a> {
     /// The name of column `index`.
     pub fn column(&self, index: usize) -> &'static str {
         self.columns[index]
+    }
+
+    /// The format's columns this file's header has: [`CsvFormat::COLUMNS`], or one of
+    /// [`CsvFormat::EARLIER_COLUMNS`] for a file of an earlier version.
+    pub fn columns(&self) -> &'static [&'static str] {
+        self.columns
     }
 
     /// The bytes of field `index`; an error if the line has no such field.

@@ -1,5 +1,8 @@
-//! Recording format v1 (docs/robot-model.md §7): a directory with `robot.toml`, `encoders.csv`,
-//! `tracker.csv` and `phases.csv`.
+//! Recording format v2 (docs/robot-model.md §7): a directory with `robot.toml`, `encoders.csv`,
+//! `tracker.csv` and `phases.csv`. Version 2 added `tracker.csv`'s `arrival_t_ns` column and made
+//! its `t_ns` the time the frame became available at the tracker; the version shows in that
+//! header (`robot.toml`'s `format` is the version of the model parameters, not of the
+//! recording). Version 1 recordings are still read ([`TrackerRow`]); writing produces v2.
 //!
 //! - [`Recording::read`] reads a whole recording; [`Recording::read_salvage`] reads one cut off
 //!   mid-write (e.g. by SIGKILL), keeping every complete row and saying what it dropped.

@@ -14,10 +14,12 @@ pub fn encoder_row(sample: &EncoderSample) -> EncoderRow {
 }
 
 /// The four `tracker.csv` rows of a tracker frame (base, front, back, tip), stamped with the
-/// frame's arrival time. A tool that is missing or not enabled is a `missing` row.
+/// time the frame became available at the tracker (`t_ns`) and its arrival time. A tool that is
+/// missing or not enabled is a `missing` row.
 pub fn tracker_rows(frame: &TrackerFrame) -> [TrackerRow; 4] {
     Tool::ALL.map(|tool| TrackerRow {
-        t_ns: frame.arrival_t_ns,
+        t_ns: frame.available_t_ns,
+        arrival_t_ns: frame.arrival_t_ns,
         frame: frame.frame_number,
         tool: recording_tool(tool),
         reading: reading(tool, frame.tool(tool)),
@@ -43,7 +45,7 @@ fn recording_tool(tool: Tool) -> RecordedTool {
     }
 }
 
-/// A tool's reading as recorded: a pose for the markers, a point for the tip. Format v1 has
+/// A tool's reading as recorded: a pose for the markers, a point for the tip. The format has
 /// no `disabled` status: a tool not enabled on the tracker is recorded as `missing`.
 fn reading(tool: Tool, sample: &ToolSample) -> ToolReading {
     match (sample.status, tool) {
@@ -65,7 +67,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_frame_becomes_four_rows_in_tool_order_with_its_arrival_stamp() {
+    fn a_frame_becomes_four_rows_in_tool_order_with_its_availability_and_arrival_stamps() {
         let seen = ToolSample {
             status: ToolStatus::Ok,
             quaternion: [0.5, 0.5, -0.5, 0.5],
@@ -75,6 +77,7 @@ mod tests {
         let mut frame = TrackerFrame {
             seq: 7,
             arrival_t_ns: 123_456_789,
+            available_t_ns: 122_856_789,
             frame_number: 42,
             tools: [seen; 4],
         };
@@ -83,7 +86,9 @@ mod tests {
         let rows = tracker_rows(&frame);
         let tools: Vec<_> = rows.iter().map(|r| r.tool.name()).collect();
         assert_eq!(tools, ["base", "front", "back", "tip"]);
-        assert!(rows.iter().all(|r| r.t_ns == 123_456_789 && r.frame == 42));
+        assert!(rows
+            .iter()
+            .all(|r| (r.t_ns, r.arrival_t_ns, r.frame) == (122_856_789, 123_456_789, 42)));
         assert!(matches!(rows[0].reading, ToolReading::Pose { rms, .. } if rms == 0.12));
         assert_eq!(rows[1].reading, ToolReading::Missing);
         assert_eq!(rows[2].reading, ToolReading::Missing);

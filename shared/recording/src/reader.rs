@@ -38,6 +38,8 @@ pub struct RowReader<F: CsvFormat, R: Read = File> {
     options: ReadOptions,
     dropped: Option<DroppedTail>,
     finished: bool,
+    /// The format's columns the header has (the current ones or an earlier version's).
+    columns: &'static [&'static str],
     format: PhantomData<F>,
 }
 
@@ -83,6 +85,7 @@ impl<F: CsvFormat, R: Read> RowReader<F, R> {
             options,
             dropped: None,
             finished: false,
+            columns: F::COLUMNS,
             format: PhantomData,
         };
         this.read_header()?;
@@ -111,7 +114,7 @@ impl<F: CsvFormat, R: Read> RowReader<F, R> {
             };
         };
         if !(span.unterminated && expected.starts_with(&span.text)) {
-            self.check_header(span.line, expected, &span.text)?;
+            self.columns = self.check_header(span.line, expected, &span.text)?;
         }
         if span.unterminated {
             self.finished = true;
@@ -120,21 +123,46 @@ impl<F: CsvFormat, R: Read> RowReader<F, R> {
         Ok(())
     }
 
-    fn check_header(&self, line: u64, expected: String, found: &str) -> Result<(), RecordingError> {
-        for (index, &column) in F::COLUMNS.iter().enumerate() {
+    /// The format's columns the header in `self.record` starts with: the current ones, else
+    /// the first earlier version's that fit; if none fit, the error is about the current ones.
+    fn check_header(
+        &self,
+        line: u64,
+        expected: String,
+        found: &str,
+    ) -> Result<&'static [&'static str], RecordingError> {
+        let problem = match self.header_problem(F::COLUMNS, expected, found) {
+            None => return Ok(F::COLUMNS),
+            Some(problem) => problem,
+        };
+        F::EARLIER_COLUMNS
+            .iter()
+            .find(|columns| self.header_problem(columns, String::new(), found).is_none())
+            .copied()
+            .ok_or_else(|| self.malformed(line, problem))
+    }
+
+    /// What keeps the header in `self.record` from starting with `columns`, if anything.
+    fn header_problem(
+        &self,
+        columns: &'static [&'static str],
+        expected: String,
+        found: &str,
+    ) -> Option<Problem> {
+        for (index, &column) in columns.iter().enumerate() {
             match self.record.get(index) {
                 None => {
                     let found = self.record.len();
-                    return Err(self.malformed(line, Problem::MissingColumn { column, found }));
+                    return Some(Problem::MissingColumn { column, found });
                 }
                 Some(field) if field != column.as_bytes() => {
                     let found = found.to_owned();
-                    return Err(self.malformed(line, Problem::WrongHeader { expected, found }));
+                    return Some(Problem::WrongHeader { expected, found });
                 }
                 Some(_) => {}
             }
         }
-        Ok(())
+        None
     }
 
     /// Reads the next record into `self.record`; `None` at the end of the input.
@@ -189,7 +217,7 @@ impl<F: CsvFormat, R: Read> RowReader<F, R> {
         if span.unterminated {
             return self.truncated_tail(span).err().map(Err);
         }
-        let fields = Fields::new(&self.path, span.line, &self.record, F::COLUMNS);
+        let fields = Fields::new(&self.path, span.line, &self.record, self.columns);
         let row = F::parse(&fields).and_then(|row| match F::check(&row, &mut self.state) {
             Ok(()) => Ok(row),
             Err(problem) => Err(fields.error(problem)),

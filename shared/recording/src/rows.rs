@@ -77,8 +77,13 @@ pub enum ToolReading {
 /// One row of `tracker.csv`: one tool in one tracker frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackerRow {
-    /// Host arrival stamp (ns).
+    /// When the frame became available at the tracker, estimated on the host: host
+    /// `CLOCK_MONOTONIC` ns. The time every reader dates the frame by (the frame clock line,
+    /// the latency). In a format v1 recording, the arrival stamp (v1 had no other).
     pub t_ns: i64,
+    /// When the reply carrying the frame arrived at the host, host `CLOCK_MONOTONIC` ns (not
+    /// before `t_ns`). In a format v1 recording, equal to `t_ns`.
+    pub arrival_t_ns: i64,
     /// Tracker frame counter.
     pub frame: u32,
     /// Which tool.

@@ -1,5 +1,11 @@
-//! `tracker.csv`: `t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms`, one row per tool per tracker
-//! frame. A `missing` row leaves every number empty; a `tip` row leaves the quaternion empty.
+//! `tracker.csv` (format v2): `t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns`, one
+//! row per tool per tracker frame. `t_ns` is when the frame became available at the tracker
+//! (estimated on the host), `arrival_t_ns` when its reply arrived (not before `t_ns`). A
+//! `missing` row leaves every number but the stamps empty; a `tip` row leaves the quaternion
+//! empty.
+//!
+//! Format v1 files (the same columns without `arrival_t_ns`, `t_ns` the arrival stamp) are
+//! still read: their rows' availability and arrival are both that stamp.
 
 use crate::error::{Problem, RecordingError};
 use crate::format::{CsvFormat, Fields, RecordBuilder};
@@ -9,8 +15,10 @@ use crate::rows::{Tool, ToolReading, TrackerRow};
 const QW: usize = 4;
 /// Index of the `x` column; the position is `x..=z`.
 const X: usize = 8;
-/// Index of the `rms` column, the last.
+/// Index of the `rms` column, the last reading column.
 const RMS: usize = 11;
+/// Index of the `arrival_t_ns` column (format v2).
+const ARRIVAL: usize = 12;
 
 /// The `tracker.csv` format.
 #[derive(Debug, Clone, Copy, Default)]
@@ -19,14 +27,34 @@ pub struct TrackerCsv;
 impl CsvFormat for TrackerCsv {
     const FILE_NAME: &'static str = "tracker.csv";
     const COLUMNS: &'static [&'static str] = &[
-        "t_ns", "frame", "tool", "status", "qw", "qx", "qy", "qz", "x", "y", "z", "rms",
+        "t_ns",
+        "frame",
+        "tool",
+        "status",
+        "qw",
+        "qx",
+        "qy",
+        "qz",
+        "x",
+        "y",
+        "z",
+        "rms",
+        "arrival_t_ns",
     ];
+    /// Format v1: no `arrival_t_ns`, `t_ns` is the arrival stamp.
+    const EARLIER_COLUMNS: &'static [&'static [&'static str]] = &[&[
+        "t_ns", "frame", "tool", "status", "qw", "qx", "qy", "qz", "x", "y", "z", "rms",
+    ]];
     type Row = TrackerRow;
     /// Tracker rows are independent of each other.
     type State = ();
 
     fn parse(fields: &Fields<'_>) -> Result<TrackerRow, RecordingError> {
         let t_ns = fields.integer(0)?;
+        let arrival_t_ns = match fields.columns().len() > ARRIVAL {
+            true => fields.integer(ARRIVAL)?,
+            false => t_ns,
+        };
         let frame = fields.integer(1)?;
         let tool_name = fields.text(2)?;
         let tool = Tool::from_name(tool_name)
@@ -62,6 +90,7 @@ impl CsvFormat for TrackerCsv {
         };
         Ok(TrackerRow {
             t_ns,
+            arrival_t_ns,
             frame,
             tool,
             reading,
@@ -69,6 +98,12 @@ impl CsvFormat for TrackerCsv {
     }
 
     fn check(row: &TrackerRow, _: &mut ()) -> Result<(), Problem> {
+        if row.arrival_t_ns < row.t_ns {
+            return Err(Problem::ArrivalBeforeAvailable {
+                t_ns: row.t_ns,
+                arrival_t_ns: row.arrival_t_ns,
+            });
+        }
         let (first_column, values) = match row.reading {
             ToolReading::Missing => return Ok(()),
             ToolReading::Pose { .. } if row.tool == Tool::Tip => {
@@ -128,6 +163,7 @@ impl CsvFormat for TrackerCsv {
                 position.iter().chain([rms]).for_each(|&v| out.float(v));
             }
         }
+        out.integer(row.arrival_t_ns);
     }
 }
 

@@ -9,7 +9,10 @@ use sabr_recording::{
 };
 
 const ENCODERS_HEADER: &str = "t_ns,c1,c2,c3,c4,c5\n";
+/// The header of a format v1 `tracker.csv` (still read).
 const TRACKER_HEADER: &str = "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms\n";
+/// The header of a format v2 `tracker.csv`.
+const TRACKER_HEADER_V2: &str = "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns\n";
 const PHASES_HEADER: &str = "t_start_ns,t_end_ns,phase\n";
 
 /// A valid recording in a fresh directory, then `file` replaced by `content`; returns the
@@ -229,6 +232,47 @@ fn numbers_on_a_missing_row() {
 }
 
 #[test]
+fn version_2_rows_without_a_valid_arrival_stamp() {
+    let missing_column =
+        format!("{TRACKER_HEADER_V2}1,1,base,missing,,,,,,,,,3\n2,2,tip,ok,,,,,1,2,3,0\n");
+    assert_rejected(
+        "tracker.csv",
+        &missing_column,
+        3,
+        "missing column `arrival_t_ns` (found 12 fields)",
+    );
+    let empty = format!("{TRACKER_HEADER_V2}1,1,base,missing,,,,,,,,,\n");
+    assert_rejected(
+        "tracker.csv",
+        &empty,
+        2,
+        "field `arrival_t_ns`: empty, expected a number",
+    );
+    let invalid = format!("{TRACKER_HEADER_V2}1,1,front,ok,1,0,0,0,1,2,3,0.1,soon\n");
+    assert_rejected(
+        "tracker.csv",
+        &invalid,
+        2,
+        "field `arrival_t_ns`: invalid integer \"soon\"",
+    );
+    let early =
+        format!("{TRACKER_HEADER_V2}10,1,base,missing,,,,,,,,,10\n10,1,tip,missing,,,,,,,,,9\n");
+    let error = assert_rejected(
+        "tracker.csv",
+        &early,
+        3,
+        "field `arrival_t_ns`: 9 is before the frame became available at t_ns 10",
+    );
+    assert_eq!(
+        error.problem(),
+        Some(&Problem::ArrivalBeforeAvailable {
+            t_ns: 10,
+            arrival_t_ns: 9
+        })
+    );
+}
+
+#[test]
 fn encoder_time_stamps_going_back() {
     let content = format!("{ENCODERS_HEADER}10,0,0,0,0,0\n20,0,0,0,0,0\n15,0,0,0,0,0\n");
     assert_rejected(
@@ -335,6 +379,7 @@ fn assert_refused(
 fn point(tool: Tool) -> TrackerRow {
     TrackerRow {
         t_ns: 1,
+        arrival_t_ns: 2,
         frame: 1,
         tool,
         reading: ToolReading::Point {
@@ -385,6 +430,21 @@ fn writer_refuses_a_pose_for_the_tip_and_a_point_for_a_marker() {
     assert_refused("tracker.csv", 2, "a front row cannot hold a point", |w| {
         w.write_tracker(&point(Tool::Front))
     });
+}
+
+#[test]
+fn writer_refuses_an_arrival_before_the_availability() {
+    let early = TrackerRow {
+        t_ns: 5,
+        arrival_t_ns: 4,
+        ..point(Tool::Tip)
+    };
+    assert_refused(
+        "tracker.csv",
+        2,
+        "field `arrival_t_ns`: 4 is before the frame became available at t_ns 5",
+        |w| w.write_tracker(&early),
+    );
 }
 
 #[test]

@@ -82,6 +82,7 @@ fn sample_recording() -> Recording {
             };
             tracker.push(TrackerRow {
                 t_ns,
+                arrival_t_ns: t_ns + i64::from(frame % 7) * 150_000,
                 frame: u32::MAX - frame,
                 tool,
                 reading,
@@ -158,6 +159,7 @@ fn random_finite_floats_round_trip_bit_for_bit() {
     written.tracker = (0..20_000)
         .map(|i| TrackerRow {
             t_ns: i,
+            arrival_t_ns: i + 1_000_000,
             frame: i as u32,
             tool: Tool::Front,
             reading: ToolReading::Pose {
@@ -220,12 +222,14 @@ fn tracker_rows_have_the_documented_text_form() {
     recording.tracker = vec![
         TrackerRow {
             t_ns: 5,
+            arrival_t_ns: 7,
             frame: 9,
             tool: Tool::Base,
             reading: ToolReading::Missing,
         },
         TrackerRow {
             t_ns: 5,
+            arrival_t_ns: 7,
             frame: 9,
             tool: Tool::Tip,
             reading: ToolReading::Point {
@@ -235,6 +239,7 @@ fn tracker_rows_have_the_documented_text_form() {
         },
         TrackerRow {
             t_ns: 5,
+            arrival_t_ns: 5,
             frame: 9,
             tool: Tool::Front,
             reading: ToolReading::Pose {
@@ -248,10 +253,10 @@ fn tracker_rows_have_the_documented_text_form() {
     let text = std::fs::read_to_string(tmp.path().join("tracker.csv")).unwrap();
     assert_eq!(
         text,
-        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms\n\
-         5,9,base,missing,,,,,,,,\n\
-         5,9,tip,ok,,,,,1.5,-2,0.1,0.25\n\
-         5,9,front,ok,1,0,-0,0.30000000000000004,0.0000001,2,3,0.5\n"
+        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns\n\
+         5,9,base,missing,,,,,,,,,7\n\
+         5,9,tip,ok,,,,,1.5,-2,0.1,0.25,7\n\
+         5,9,front,ok,1,0,-0,0.30000000000000004,0.0000001,2,3,0.5,5\n"
     );
     let encoders = std::fs::read_to_string(tmp.path().join("encoders.csv")).unwrap();
     assert!(encoders.starts_with("t_ns,c1,c2,c3,c4,c5\n1700000000000000,-1000,0,"));
@@ -269,10 +274,10 @@ fn extra_trailing_columns_and_unknown_phases_are_accepted() {
     .unwrap();
     std::fs::write(
         dir.join("tracker.csv"),
-        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,port\n\
-         10,1,back,ok,1,0,0,0,4,5,6,0.1,2\n\
-         10,1,tip,missing,,,,,,,,,\n\
-         10,1,front,ok,1,0,0,0,4,5,6,0.1\n",
+        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns,port\n\
+         10,1,back,ok,1,0,0,0,4,5,6,0.1,12,2\n\
+         10,1,tip,missing,,,,,,,,,12,\n\
+         10,1,front,ok,1,0,0,0,4,5,6,0.1,12\n",
     )
     .unwrap();
     std::fs::write(
@@ -305,6 +310,7 @@ fn extra_trailing_columns_and_unknown_phases_are_accepted() {
     };
     let row = |tool, reading| TrackerRow {
         t_ns: 10,
+        arrival_t_ns: 12,
         frame: 1,
         tool,
         reading,
@@ -319,6 +325,62 @@ fn extra_trailing_columns_and_unknown_phases_are_accepted() {
     );
     let names: Vec<_> = read.phases.iter().map(|p| p.phase.as_str()).collect();
     assert_eq!(names, ["warm-up", "validation"]);
+}
+
+#[test]
+fn a_version_1_recording_is_read_with_its_arrival_stamp_as_the_availability() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("robot.toml"), "format = 1\n").unwrap();
+    std::fs::write(
+        dir.join("encoders.csv"),
+        "t_ns,c1,c2,c3,c4,c5\n10,1,2,3,4,5\n",
+    )
+    .unwrap();
+    std::fs::write(dir.join("phases.csv"), "t_start_ns,t_end_ns,phase\n").unwrap();
+    // Format v1: no `arrival_t_ns`; an extra column after `rms` is someone's own.
+    std::fs::write(
+        dir.join("tracker.csv"),
+        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms\n\
+         50,3,base,ok,1,0,0,0,4,5,6,0.1\n\
+         50,3,tip,missing,,,,,,,,\n\
+         100,4,tip,ok,,,,,1,2,3,0\n",
+    )
+    .unwrap();
+    let read = Recording::read(dir).unwrap();
+    let stamps: Vec<_> = read
+        .tracker
+        .iter()
+        .map(|r| (r.t_ns, r.arrival_t_ns, r.frame, r.tool))
+        .collect();
+    assert_eq!(
+        stamps,
+        [
+            (50, 50, 3, Tool::Base),
+            (50, 50, 3, Tool::Tip),
+            (100, 100, 4, Tool::Tip)
+        ]
+    );
+    std::fs::write(
+        dir.join("tracker.csv"),
+        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,port\n\
+         50,3,base,ok,1,0,0,0,4,5,6,0.1,7\n",
+    )
+    .unwrap();
+    let read = Recording::read(dir).unwrap();
+    assert_eq!(
+        (read.tracker[0].t_ns, read.tracker[0].arrival_t_ns),
+        (50, 50)
+    );
+    // Written again, it is a v2 recording.
+    let copy = tempfile::tempdir().unwrap();
+    write_all(&read, copy.path()).unwrap();
+    let text = std::fs::read_to_string(copy.path().join("tracker.csv")).unwrap();
+    assert_eq!(
+        text,
+        "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns\n\
+         50,3,base,ok,1,0,0,0,4,5,6,0.1,50\n"
+    );
 }
 
 #[test]

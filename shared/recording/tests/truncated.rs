@@ -106,6 +106,16 @@ fn tracker_cut_at_every_byte() {
 }
 
 #[test]
+fn tracker_v2_cut_at_every_byte() {
+    let content = "t_ns,frame,tool,status,qw,qx,qy,qz,x,y,z,rms,arrival_t_ns\n\
+                   10,1,base,ok,0.5,-0.5,0.5,0.5,100.25,-3,7e-5,0.12,11\n\
+                   10,1,front,missing,,,,,,,,,11\n\
+                   60,2,back,ok,1,0,0,0,1,2,3,0.2,61,extra\n\
+                   60,2,tip,ok,,,,,1.5,2.5,-3.5,0.3,61\n";
+    check_every_cut::<TrackerCsv>(content, &line_ends(content));
+}
+
+#[test]
 fn phases_with_quoted_names_cut_at_every_byte() {
     let records = [
         "t_start_ns,t_end_ns,phase\n",
@@ -138,6 +148,7 @@ fn read_salvage_reports_what_each_file_dropped() {
             .collect(),
         tracker: vec![TrackerRow {
             t_ns: 3,
+            arrival_t_ns: 4,
             frame: 1,
             tool: Tool::Tip,
             reading: ToolReading::Missing,
@@ -197,6 +208,7 @@ fn tracker_row(i: u64) -> TrackerRow {
     let x = i as f64 / 3.0;
     TrackerRow {
         t_ns: 1_000_000 + i as i64 * 50_000,
+        arrival_t_ns: 1_600_000 + i as i64 * 50_000,
         frame: i as u32,
         tool: Tool::Front,
         reading: ToolReading::Pose {

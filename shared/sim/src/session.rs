@@ -1,5 +1,12 @@
 //! An offline session: sample the truth, build the plan, drive the true robot through it
 //! and record the encoder and tracker streams as a [`Recording`] together with the [`Truth`].
+//!
+//! The offline session polls no device: a tracker frame is recorded at the instant it becomes
+//! available (exposure + latency + jitter, the emulator's `arrival_ns`), as both its
+//! availability stamp `t_ns` and its arrival stamp `arrival_t_ns`. That is what the live
+//! driver's availability estimate is on average (the midpoint of the polls around the instant,
+//! unbiased); the live arrival stamp is later by the wait for a poll and one serial exchange,
+//! which the offline session does not model.
 
 use std::path::PathBuf;
 
@@ -324,6 +331,7 @@ impl Session {
                 if let Some(arrival) = frame.arrival_ns {
                     tracker_rows.extend(frame.readings.iter().map(|(tool, reading)| TrackerRow {
                         t_ns: host + arrival,
+                        arrival_t_ns: host + arrival,
                         frame: frame.exposure.frame,
                         tool: *tool,
                         reading: *reading,

@@ -169,7 +169,10 @@ pub struct Exposure {
 pub struct TrackerFrame {
     /// The exposure.
     pub exposure: Exposure,
-    /// Arrival at the host (ns after power-up); `None` if the frame was dropped.
+    /// When the frame becomes available to the host (ns after power-up): the latency and jitter
+    /// run from the exposure to here. The rig's simulated device answers polls with the frame
+    /// from this instant; an offline session records it with this stamp. `None` if the frame
+    /// was dropped.
     pub arrival_ns: Option<i64>,
     /// Readings of base, front, back and tip, in `S`.
     pub readings: [(Tool, ToolReading); 4],

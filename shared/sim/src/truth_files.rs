@@ -366,7 +366,7 @@ fn csv_error(path: &Path, columns: &[&str], error: csv::Error) -> SimError {
     }
 }
 
-/// Writes a recording (format v1) to `dir` and its truth to `dir/truth/`. `dir` must not
+/// Writes a recording (format v2) to `dir` and its truth to `dir/truth/`. `dir` must not
 /// already hold a recording or a truth: nothing is overwritten.
 pub fn write_session(dir: &Path, recording: &Recording, truth: &Truth) -> Result<(), SimError> {
     write_all(recording, dir)?;

@@ -221,7 +221,8 @@ mod tests {
         session.encoder(&sample(2, end_ns + 1));
         let frame = TrackerFrame {
             seq: 1,
-            arrival_t_ns: end_ns + 1,
+            arrival_t_ns: end_ns + 2,
+            available_t_ns: end_ns + 1,
             ..TrackerFrame::default()
         };
         session.frame(&frame);

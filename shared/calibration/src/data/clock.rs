@@ -1,5 +1,6 @@
-//! The exposure clock of the tracker: a robust line through the frame counter and the host
-//! arrival stamps. The tracker latency is defined against this line (exposure = line −
+//! The exposure clock of the tracker: a robust line through the frame counter and the frames'
+//! host stamps (when each frame became available at the tracker: `tracker.csv`'s `t_ns`, the
+//! live `TrackerFrame::available_t_ns`; "arrival" below means that stamp). The tracker latency is defined against this line (exposure = line −
 //! latency).
 //!
 //! [`ClockLine`] is the one fit of that line: the engine runs it once over a whole recording

@@ -13,8 +13,9 @@ use crate::math::se3;
 pub struct MeasuredFrame {
     /// Tracker frame counter.
     pub frame: u32,
-    /// Host arrival stamp (ns, `CLOCK_MONOTONIC`).
-    pub arrival_ns: i64,
+    /// The frame's host stamp (ns, `CLOCK_MONOTONIC`): when it became available at the
+    /// tracker, `tracker.csv`'s `t_ns` (in a format v1 recording, the arrival stamp).
+    pub t_ns: i64,
     /// Measured `T_Bb_Tf` (front marker tool), if seen.
     pub front: Option<Isometry3<f64>>,
     /// Measured `T_Bb_Tb` (back marker tool), if seen.
@@ -75,7 +76,7 @@ pub fn measured_frames(
         let to_robot = robot_from_marker * base.inverse();
         frames.push(MeasuredFrame {
             frame,
-            arrival_ns: rows[end - 1].t_ns,
+            t_ns: rows[end - 1].t_ns,
             front: raw.front.map(|p| to_robot * p),
             back: raw.back.map(|p| to_robot * p),
             tip: raw.tip.map(|p| to_robot * p),
@@ -148,6 +149,7 @@ mod tests {
         let t = pose.translation.vector;
         TrackerRow {
             t_ns: 1_000 + i64::from(frame),
+            arrival_t_ns: 1_500 + i64::from(frame),
             frame,
             tool,
             reading: ToolReading::Pose {
@@ -169,6 +171,7 @@ mod tests {
             pose_row(7, Tool::Front, &t_s_tf),
             TrackerRow {
                 t_ns: 1007,
+                arrival_t_ns: 1507,
                 frame: 7,
                 tool: Tool::Back,
                 reading: ToolReading::Missing,

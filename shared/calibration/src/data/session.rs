@@ -67,8 +67,9 @@ pub struct SessionData {
 impl SessionData {
     /// Synchronises `recording`: its tracker frames in `Bb` (tools relative to the base
     /// marker, moved with `robot`'s fixture pose), the clock line through their counters and
-    /// arrival stamps, and the encoder track (gaps longer than `max_encoder_gap_ns` are not
-    /// interpolated across).
+    /// host stamps (`tracker.csv`'s `t_ns`: when each frame became available at the tracker,
+    /// as the live `sync` stamps them; a format v1 recording's arrival stamps), and the
+    /// encoder track (gaps longer than `max_encoder_gap_ns` are not interpolated across).
     pub fn synchronise(
         recording: &Recording,
         robot: &RobotParams,
@@ -84,8 +85,8 @@ impl SessionData {
             )));
         }
         let counters: Vec<u32> = frames.iter().map(|f| f.frame).collect();
-        let arrivals: Vec<i64> = frames.iter().map(|f| f.arrival_ns).collect();
-        let clock = ClockFit::fit(&counters, &arrivals)?;
+        let stamps: Vec<i64> = frames.iter().map(|f| f.t_ns).collect();
+        let clock = ClockFit::fit(&counters, &stamps)?;
         let ticks = unwrap_counters(&counters)?;
         let encoders = EncoderTrack::new(&recording.encoders, max_encoder_gap_ns)?;
         Ok(Self {

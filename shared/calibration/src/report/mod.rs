@@ -31,7 +31,8 @@ pub use discovery::{summary_text, EffectEntry, FinalReport, StepMetrics};
 pub struct Report {
     /// The recording directory.
     pub recording: String,
-    /// Tracker latency: exposure → arrival (the robust line through the arrival stamps), ms.
+    /// Tracker latency: exposure → availability at the tracker (the robust line through the
+    /// frames' `t_ns` stamps; a format v1 recording's arrival stamps), ms.
     pub latency_ms: f64,
     /// Standard deviation of the latency (ms).
     pub latency_std_ms: f64,
@@ -62,7 +63,7 @@ pub struct Report {
 pub struct TimeSyncReport {
     /// Host time per tracker frame-counter tick (ms).
     pub tracker_tick_ms: f64,
-    /// Robust standard deviation of the arrival stamps about the clock line (ms).
+    /// Robust standard deviation of the frames' `t_ns` stamps about the clock line (ms).
     pub arrival_jitter_ms: f64,
     /// The model-free latency estimate that started the fits (ms).
     pub model_free_latency_ms: f64,
