@@ -16,7 +16,12 @@ pub struct DoorbellEnd<Out: Message, In: Message> {
 impl<Out: Message, In: Message> DoorbellEnd<Out, In> {
     /// Starts a node `name` in `domain` with its subscriber, then its publisher (a peer that
     /// sees this side's subscriber may send).
-    pub fn open(domain: &Domain, name: &str, outbound: &str, inbound: &str) -> anyhow::Result<Self> {
+    pub fn open(
+        domain: &Domain,
+        name: &str,
+        outbound: &str,
+        inbound: &str,
+    ) -> anyhow::Result<Self> {
         let rt = NodeRuntime::with_domain(name, domain.clone())
             .with_context(|| format!("cannot start node {name} in domain {domain}"))?;
         let subscriber = rt.subscriber::<In>(inbound)?;

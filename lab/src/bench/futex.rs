@@ -47,17 +47,18 @@ pub struct FutexEnd {
 impl FutexEnd {
     /// Creates the segment `name` (the ping side owns and removes it).
     pub fn create(name: &str) -> anyhow::Result<Self> {
-        let storage = <Storage<Counters> as DynamicStorage<Counters>>::Builder::new(&file_name(name)?)
-            .has_ownership(true)
-            .initializer(|value, _| {
-                value.write(Counters {
-                    pings: AtomicU32::new(0),
-                    pongs: AtomicU32::new(0),
-                });
-                true
-            })
-            .create()
-            .map_err(|e| anyhow::anyhow!("cannot create the futex segment {name}: {e:?}"))?;
+        let storage =
+            <Storage<Counters> as DynamicStorage<Counters>>::Builder::new(&file_name(name)?)
+                .has_ownership(true)
+                .initializer(|value, _| {
+                    value.write(Counters {
+                        pings: AtomicU32::new(0),
+                        pongs: AtomicU32::new(0),
+                    });
+                    true
+                })
+                .create()
+                .map_err(|e| anyhow::anyhow!("cannot create the futex segment {name}: {e:?}"))?;
         Ok(Self {
             storage,
             side: Side::Ping,
@@ -67,10 +68,11 @@ impl FutexEnd {
 
     /// Opens the segment `name` created by the ping side, waiting up to `timeout` for it.
     pub fn open(name: &str, timeout: Duration) -> anyhow::Result<Self> {
-        let storage = <Storage<Counters> as DynamicStorage<Counters>>::Builder::new(&file_name(name)?)
-            .timeout(timeout)
-            .open(AccessMode::ReadWrite)
-            .map_err(|e| anyhow::anyhow!("cannot open the futex segment {name}: {e:?}"))?;
+        let storage =
+            <Storage<Counters> as DynamicStorage<Counters>>::Builder::new(&file_name(name)?)
+                .timeout(timeout)
+                .open(AccessMode::ReadWrite)
+                .map_err(|e| anyhow::anyhow!("cannot open the futex segment {name}: {e:?}"))?;
         Ok(Self {
             storage,
             side: Side::Pong,

@@ -26,8 +26,7 @@ const LOG_TAIL_LINES: usize = 15;
 /// The launch file of the sensing graph the bench measures (`launch/graphs/bench-sensing.toml`).
 pub const SENSING_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/bench-sensing.toml");
 /// The launch file of the setpoint graph (`launch/graphs/bench-setpoints.toml`).
-pub const SETPOINTS_LAUNCH_FILE: &str =
-    include_str!("../../../launch/graphs/bench-setpoints.toml");
+pub const SETPOINTS_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/bench-setpoints.toml");
 
 /// The placement `launch_file` gives `node` (executables looked up in `bin_dir`).
 pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Placement> {

@@ -10,10 +10,10 @@ use super::payload::{baseline_name, Payload, Transport};
 use super::stats::Measurement;
 use super::uds::{SocketFile, UdsEnd};
 use anyhow::{bail, Context};
+use sabr_launcher::placement::Placement;
 use sabr_node::msgs::{
     EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
 };
-use sabr_launcher::placement::Placement;
 use sabr_node::{Domain, Message};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};

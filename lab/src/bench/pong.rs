@@ -1,10 +1,10 @@
 //! The echo side of a ping-pong baseline: the `sabr-pong` executable, started by the
 //! measuring `sabr bench` process, answers a fixed number of messages and exits.
 
-use super::iox::IoxEnd;
-use super::payload::{Payload, Transport};
 use super::doorbell::DoorbellEnd;
 use super::futex::FutexEnd;
+use super::iox::IoxEnd;
+use super::payload::{Payload, Transport};
 use super::pingpong::{futex_segment, service_names, wait_mode, PEER_TIMEOUT};
 use super::uds::UdsEnd;
 use anyhow::Context;

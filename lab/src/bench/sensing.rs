@@ -609,7 +609,10 @@ mod tests {
             assert_eq!(node.restart, sabr_launcher::spec::RestartPolicy::Never);
             node.args.clone()
         };
-        assert_eq!(args("rig"), ["--autoplay", "--seed", &SESSION_SEED.to_string()]);
+        assert_eq!(
+            args("rig"),
+            ["--autoplay", "--seed", &SESSION_SEED.to_string()]
+        );
         assert_eq!(args("ik"), ["--params", "ik-params.toml"]);
         let sync = args("sync");
         assert_eq!(sync[0], "--latency-ms");

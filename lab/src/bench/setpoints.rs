@@ -296,6 +296,9 @@ mod tests {
         )
         .unwrap();
         assert_eq!(graph.nodes.len(), 1);
-        assert_eq!(graph.nodes[0].args, ["--seed", &super::super::compute::SESSION_SEED.to_string()]);
+        assert_eq!(
+            graph.nodes[0].args,
+            ["--seed", &super::super::compute::SESSION_SEED.to_string()]
+        );
     }
 }

@@ -1,4 +1,4 @@
-//! `sabr-recorder`: writes the live streams of the graph as a recording (format v1,
+//! `sabr-recorder`: writes the live streams of the graph as a recording (format v2,
 //! docs/robot-model.md §7) that `sabr calibrate` reads offline.
 //!
 //! Subscribes to `sabr/encoders/samples` (→ `encoders.csv`), `sabr/tracker/frames`

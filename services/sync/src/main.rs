@@ -18,8 +18,8 @@ use std::time::Duration;
 #[derive(Debug, clap::Parser)]
 #[command(name = "sabr-sync", about)]
 struct Args {
-    /// Tracker latency, ms: the frame clock line (a robust fit of arrival time against frame
-    /// counter) minus the exposure time. Replaced by the calibrated latency of a parameter
+    /// Tracker latency, ms: the frame clock line (a robust fit of each frame's availability
+    /// stamp against its frame counter) minus the exposure time. Replaced by the calibrated latency of a parameter
     /// set (`--params`, or announced on sabr/calibrator/parameters) when it has one.
     #[arg(long, value_name = "MS")]
     latency_ms: Option<f64>,

@@ -72,10 +72,7 @@ impl IkClient {
     ) -> Result<IkResponse, IkClientError> {
         request.id = self.next_id;
         self.next_id += 1;
-        let pending = self
-            .client
-            .send(request)?
-            .ok_or(IkClientError::NoServer)?;
+        let pending = self.client.send(request)?.ok_or(IkClientError::NoServer)?;
         match self.client.receive(&pending, timeout)? {
             Some(response) => Ok(response),
             None if !pending.is_connected() => Err(IkClientError::ServerGone { id: request.id }),

@@ -1,9 +1,9 @@
 //! Starting, watching, restarting and stopping the node processes of a graph.
 
 use crate::placement::Prepared;
+use crate::progress::Progress;
 use crate::run_dir::RunDir;
 use crate::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
-use crate::progress::Progress;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_node::msgs::LifecycleState;

@@ -55,8 +55,8 @@ pub use message::Message;
 pub use observer::{domain_files, release_domain, GraphObserver};
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{
-    run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD, NODE_NAME_ENV,
-    RUN_DIR_ENV,
+    run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime,
+    HEARTBEAT_PERIOD, NODE_NAME_ENV, RUN_DIR_ENV,
 };
 pub use service::{in_run_dir, service_main, StallWatch, StatusTimer, STATUS_PERIOD};
 pub use time::monotonic_ns;

@@ -1,9 +1,9 @@
 //! Watching the nodes of a domain from outside the graph (the launcher, tests).
 
 use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
+use crate::Doorbell;
 use crate::{Domain, NodeError, Transport};
 use iceoryx2::node::Node;
-use crate::Doorbell;
 use iceoryx2::prelude::NodeBuilder;
 use sabr_msgs::{services, Lifecycle};
 use std::path::PathBuf;

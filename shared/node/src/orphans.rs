@@ -48,12 +48,15 @@ pub(crate) fn remove_orphaned_nodes<S: Transport>(domain: &Domain) -> usize {
             .iter()
             .filter(|f| f.to_string_lossy().contains(&id_text))
             .collect();
-        for tag in own.iter().filter(|f| f.to_string_lossy().ends_with(".service_tag")) {
+        for tag in own
+            .iter()
+            .filter(|f| f.to_string_lossy().ends_with(".service_tag"))
+        {
             let name = tag.file_name().map(|n| n.to_string_lossy().into_owned());
-            let Some(hash) = services
-                .iter()
-                .find(|hash| name.as_deref().is_some_and(|n| n.contains(&hash.to_string())))
-            else {
+            let Some(hash) = services.iter().find(|hash| {
+                name.as_deref()
+                    .is_some_and(|n| n.contains(&hash.to_string()))
+            }) else {
                 // The service is gone: only the tag is left.
                 let _ = std::fs::remove_file(tag);
                 continue;

@@ -3,12 +3,11 @@
 
 use crate::message::Message;
 use crate::transport::{Transport, Waitable};
-use crate::NodeError;
 use crate::Doorbell;
+use crate::NodeError;
 use iceoryx2::prelude::PortFactory;
 use iceoryx2::service::port_factory::publish_subscribe;
 use std::time::{Duration, Instant};
-
 
 /// Publishes `T` on a service and wakes every [`Subscriber`] of it that is waiting.
 pub struct Publisher<T: Message, S: Transport = Doorbell> {

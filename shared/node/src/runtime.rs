@@ -4,9 +4,9 @@ use crate::events::service_name;
 use crate::message::Message;
 use crate::ports::{Publisher, Subscriber};
 use crate::transport::{Transport, Waitable};
+use crate::Doorbell;
 use crate::{monotonic_ns, Domain, NodeError};
 use iceoryx2::node::Node;
-use crate::Doorbell;
 use iceoryx2::prelude::{NodeBuilder, NodeName};
 use iceoryx2_bb_posix::signal::SignalHandler;
 use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
@@ -362,7 +362,9 @@ impl<S: Transport> NodeRuntime<S> {
     /// Does nothing but stay in the graph (ready, heartbeat) until a signal arrives: a node
     /// whose job ended but which must not leave, e.g. holding the robot's last setpoint.
     pub fn idle(&mut self) -> Exit {
-        let idle = self.run_loop(HEARTBEAT_PERIOD, |_ctx| Ok::<_, std::convert::Infallible>(()));
+        let idle = self.run_loop(HEARTBEAT_PERIOD, |_ctx| {
+            Ok::<_, std::convert::Infallible>(())
+        });
         match idle {
             Ok(exit) => exit,
             Err(never) => match never {},

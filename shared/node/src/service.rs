@@ -115,7 +115,9 @@ impl<const N: usize> StallWatch<N> {
 
     /// Which streams are silent beyond their limit, in order.
     pub fn stalled(&self) -> [bool; N] {
-        self.streams.each_ref().map(|(_, deadline, _)| deadline.expired())
+        self.streams
+            .each_ref()
+            .map(|(_, deadline, _)| deadline.expired())
     }
 
     /// Logs the streams that stalled or recovered since the last call.
