@@ -7,7 +7,7 @@ use super::stats::Measurement;
 use anyhow::{bail, Context};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use sabr_launcher::placement::Placement;
+use sabr_launcher::placement::{Placement, Sched};
 use sabr_launcher::spec;
 use sabr_node::msgs::LifecycleState;
 use sabr_node::{Domain, GraphObserver};
@@ -37,6 +37,38 @@ pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Re
         .find(|n| n.name == node)
         .map(|n| n.placement.clone())
         .with_context(|| format!("the bench graph has no node {node}"))
+}
+
+/// Real-time priority of the bench's listening thread: above any the graphs' nodes use, so
+/// it runs as soon as it is woken.
+const PROBE_PRIORITY: u8 = 50;
+
+/// The placement of the bench's listening thread in a live graph: the CPUs of the node whose
+/// place it takes, at `SCHED_FIFO` priority [`PROBE_PRIORITY`] where the system allows it.
+/// A hop is then the transport's time to a consumer that runs when woken, not the time the
+/// nodes sharing its core spend on the same sample first (the sync, woken by the same
+/// encoder sample, would otherwise run before the bench on that core). Also returns the note
+/// printed under the tables.
+pub fn probe_placement(mut placement: Placement) -> (Placement, String) {
+    let wanted = Placement {
+        sched: Some(Sched::Fifo(PROBE_PRIORITY)),
+        ..placement.clone()
+    };
+    match wanted.probe() {
+        Ok(()) => {
+            placement = wanted;
+            let note = format!(
+                "the bench listened at {placement}: above the graph, so a hop is the                  transport's time to a consumer that runs when woken"
+            );
+            (placement, note)
+        }
+        Err(reason) => {
+            let note = format!(
+                "the bench listened at {placement} without a real-time priority ({reason}):                  a hop includes the time nodes on the same core spend on the sample first"
+            );
+            (placement, note)
+        }
+    }
 }
 
 /// Runs `run` on a thread of its own placed as `placement` says (affinity and policy are per

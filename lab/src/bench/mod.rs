@@ -332,18 +332,23 @@ fn run_hops(settings: &Settings, out: &Path, results: &mut Results) {
                 });
             results.add_graph(&format!("{graph} graph"), measured);
         };
-    // The bench listens where the sync does (a second subscriber of the same streams, and
-    // the IK client beside the server), and sends setpoints from the motion node's place.
+    // The bench listens on the sync's CPUs (a second subscriber of the same streams, and the
+    // IK client beside the server) and sends setpoints from the rig's, at a real-time
+    // priority where allowed (see `graph::probe_placement`).
     settings.measuring("the sensing graph: hops, matching error, IK round trips, CPU");
     in_domain("sensing", &|domain| {
         let place = graph::placement_of(graph::SENSING_LAUNCH_FILE, "sync", &settings.bin_dir)?;
-        graph::placed(&place, || {
+        let (place, note) = graph::probe_placement(place);
+        let mut measured = graph::placed(&place, || {
             sensing::run(&settings.sensing, &dir, &settings.bin_dir, domain)
-        })
+        })?;
+        measured.notes.push(note);
+        Ok(measured)
     });
     settings.measuring("the setpoint graph: setpoint → rig, CPU");
     in_domain("setpoints", &|domain| {
         let place = graph::placement_of(graph::SETPOINTS_LAUNCH_FILE, "rig", &settings.bin_dir)?;
+        let (place, _) = graph::probe_placement(place);
         graph::placed(&place, || {
             setpoints::run(&settings.setpoints, &dir, &settings.bin_dir, domain)
         })

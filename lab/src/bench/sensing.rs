@@ -627,6 +627,47 @@ mod tests {
     }
 
     #[test]
+    fn the_bench_places_every_node_as_the_shipped_graphs_do() {
+        let bin_dir = tempfile::tempdir().unwrap();
+        for exec in [
+            "rig",
+            "encoders",
+            "tracker",
+            "sync",
+            "recorder",
+            "ik",
+            "calibrator",
+            "motion",
+        ] {
+            std::fs::write(bin_dir.path().join(format!("sabr-{exec}")), "").unwrap();
+        }
+        let parse = |name: &str, text: &str| {
+            sabr_launcher::spec::parse(Path::new(name), text, bin_dir.path()).unwrap()
+        };
+        let shipped = parse(
+            "sim-calibration.toml",
+            include_str!("../../../launch/graphs/sim-calibration.toml"),
+        );
+        for (name, text) in [
+            ("bench-sensing.toml", SENSING_LAUNCH_FILE),
+            (
+                "bench-setpoints.toml",
+                super::super::graph::SETPOINTS_LAUNCH_FILE,
+            ),
+        ] {
+            for node in parse(name, text).nodes {
+                let same = shipped.nodes.iter().find(|n| n.name == node.name).unwrap();
+                assert_eq!(node.placement, same.placement, "{name}: {}", node.name);
+                assert!(
+                    node.placement.cpus.is_some(),
+                    "{name}: {} is placed",
+                    node.name
+                );
+            }
+        }
+    }
+
+    #[test]
     fn old_truths_are_forgotten() {
         let mut hops = SensingHops::default();
         for frame in 0..(TRUTHS_KEPT as u32 + 10) {

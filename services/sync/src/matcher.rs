@@ -218,7 +218,10 @@ impl Matcher {
         latency: Option<Latency>,
         now_ns: i64,
     ) -> Result<(), Unmatched> {
-        let clock = match self.clock.observe(frame.frame_number, frame.available_t_ns) {
+        let clock = match self
+            .clock
+            .observe_deferred(frame.frame_number, frame.available_t_ns)
+        {
             Observed::Repeated => return Err(Unmatched::Repeated),
             Observed::Learning { frames, restart } => {
                 self.locked = false;
@@ -251,8 +254,14 @@ impl Matcher {
 
     /// Matches every waiting frame whose encoder data is complete, in order, at host time
     /// `now_ns`; hands each result to `out` (a matched sample, or the frame's counter and
-    /// why it was given up).
-    pub fn poll(
+    /// why it was given up). Then, with the results out, refits the frame clock over the
+    /// frames added since its last fit (admitting a frame only extends the line).
+    pub fn poll(&mut self, now_ns: i64, out: impl FnMut(Result<MatchedSample, (u32, Unmatched)>)) {
+        self.match_pending(now_ns, out);
+        self.clock.refit();
+    }
+
+    fn match_pending(
         &mut self,
         now_ns: i64,
         mut out: impl FnMut(Result<MatchedSample, (u32, Unmatched)>),
