@@ -38,6 +38,7 @@ mod domain;
 pub mod doorbell;
 mod doorbell_rpc;
 mod events;
+mod files;
 mod message;
 mod observer;
 mod orphans;
@@ -52,7 +53,8 @@ pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
 pub use doorbell::Doorbell;
 pub use doorbell_rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
 pub use message::Message;
-pub use observer::{domain_files, release_domain, GraphObserver};
+pub use files::domain_files;
+pub use observer::{release_domain, GraphObserver};
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{
     run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime,

@@ -12,7 +12,8 @@
 //! left), then removes its remaining files (port tags, monitor files).
 
 use crate::transport::Transport;
-use crate::{domain_files, Domain};
+use crate::files::domain_files;
+use crate::Domain;
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::prelude::CallbackProgression;
 use std::path::PathBuf;

@@ -6,8 +6,9 @@
 //!    of the runtime's loops ([`crate::NodeRuntime::run_loop`] at a fixed rate,
 //!    [`crate::NodeRuntime::run_on_data`] woken by its inputs);
 //! 2. the outcome maps to one exit convention: any [`Exit`] is success (exit status 0), an
-//!    error is logged with its whole chain of causes and is a failure (exit status 1); a bad
-//!    command line is clap's usage error (exit status 2).
+//!    error is logged with its whole chain of causes (and printed on stdout as
+//!    `<service>: FAILED: <causes>`) and is a failure (exit status 1); a bad command line is
+//!    clap's usage error (exit status 2).
 //!
 //! The helpers every service needed a copy of live here once: [`in_run_dir`] (where a file
 //! goes when no flag names it), [`StatusTimer`] (the status line every [`STATUS_PERIOD`]) and
@@ -45,6 +46,8 @@ fn exit_code(service: &str, outcome: anyhow::Result<Exit>) -> ExitCode {
         }
         Err(error) => {
             tracing::error!(service, "{error:#}");
+            // Also on stdout, which the launcher shows for a node marked `console`.
+            println!("{service}: FAILED: {error:#}");
             ExitCode::FAILURE
         }
     }
