@@ -5,7 +5,14 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 const SAMPLES: u64 = 30;
-const TRANSPORTS: [&str; 3] = ["iox2-poll", "iox2-event", "uds"];
+const TRANSPORTS: [&str; 6] = [
+    "iox2-poll",
+    "iox2-event",
+    "uds",
+    "doorbell",
+    "futex",
+    "futex-cross",
+];
 const PAYLOADS: [&str; 4] = ["encoder-sample", "tracker-frame", "ik", "motor-setpoint"];
 
 fn sabr_bench(args: &[&str]) -> (Output, u32) {
@@ -45,6 +52,19 @@ fn quick_baselines_measure_every_transport_and_payload() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stdout}\n{stderr}");
     assert!(!stdout.contains("not available"), "{stdout}");
+    for payload in PAYLOADS {
+        let judged = stdout.lines().any(|line| {
+            line.trim_start()
+                .starts_with(&format!("doorbell/{payload} "))
+                && line.contains("p50 ")
+                && line.contains("p99 ")
+                && line.contains("< uds")
+        });
+        assert!(
+            judged,
+            "doorbell/{payload} not judged against uds:\n{stdout}"
+        );
+    }
 
     let rows = csv_rows(&out.join("bench.csv"));
     assert_eq!(

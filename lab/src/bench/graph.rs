@@ -58,13 +58,15 @@ pub fn probe_placement(mut placement: Placement) -> (Placement, String) {
         Ok(()) => {
             placement = wanted;
             let note = format!(
-                "the bench listened at {placement}: above the graph, so a hop is the                  transport's time to a consumer that runs when woken"
+                "the bench listened at {placement}: above the graph, so a hop is the \
+                 transport's time to a consumer that runs when woken"
             );
             (placement, note)
         }
         Err(reason) => {
             let note = format!(
-                "the bench listened at {placement} without a real-time priority ({reason}):                  a hop includes the time nodes on the same core spend on the sample first"
+                "the bench listened at {placement} without a real-time priority ({reason}): \
+                 a hop includes the time nodes on the same core spend on the sample first"
             );
             (placement, note)
         }

@@ -1,12 +1,13 @@
-//! The live-graph hops and their summary as ratios to the ping-pong baselines
+//! The live-graph hops and the transport goals, judged against the ping-pong baselines
 //! measured in the same run.
 
 use super::payload::{baseline_name, Payload, Transport};
-use super::stats::{format_ns, Measurement};
+use super::stats::{format_ns, Measurement, Summary};
 use std::fmt::Write as _;
 
-/// Goal: a hop's p99 is at most this many times the `iox2-event` round-trip p99.
-pub const BLOCKING_P99_FACTOR: f64 = 2.0;
+/// Goal: an event-driven hop's p50 is at most this many times the raw futex round-trip p50
+/// of its payload (placed as the shipped graph places that hop).
+pub const FUTEX_P50_FACTOR: f64 = 2.0;
 
 /// Goal: IK request → response p99 (ns).
 pub const IK_ROUND_TRIP_P99_LIMIT_NS: u64 = 50_000;
@@ -15,19 +16,29 @@ pub const IK_ROUND_TRIP_P99_LIMIT_NS: u64 = 50_000;
 /// solver).
 pub const IK_SOLVE_LIMIT_NS: u64 = 2_000;
 
+/// The rig's tick (ns): it applies the latest setpoint once per tick (2 kHz).
+pub const RIG_PERIOD_NS: u64 = 500_000;
+
+/// Goal: setpoint → rig p99 within one rig period plus this (ns).
+pub const SETPOINT_SLACK_NS: u64 = 50_000;
+
 /// Goal: synchronizer exposure-time matching error p99 (ns).
 pub const MATCHING_ERROR_P99_LIMIT_NS: u64 = 500_000;
+
+/// Goal: |mean signed matching error| (ns), the sync given the true tracker latency.
+pub const MATCHING_ERROR_MEAN_LIMIT_NS: f64 = 100_000.0;
 
 /// Goal: CPU use of an idle process, in cores.
 pub const IDLE_CPU_LIMIT_CORES: f64 = 0.05;
 
-/// What a hop's p99 is compared with.
+/// What a hop is compared with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Baseline {
-    /// The `iox2-event` and `uds` round trips of this payload in the same run: the goal is
-    /// p99 ≤ [`BLOCKING_P99_FACTOR`] × the `iox2-event` p99 and below the `uds` p99.
+    /// An event-driven hop carrying this payload: the goals are p99 below the `uds` round-trip
+    /// p99 and p50 within [`FUTEX_P50_FACTOR`] × the `futex` round-trip p50, both of this
+    /// payload in the same run.
     PingPong(Payload),
-    /// Not a transport latency (a time error): only the absolute limit applies.
+    /// Paced by a timer or a time error: only the absolute limit applies.
     None,
 }
 
@@ -38,7 +49,7 @@ pub struct HopSpec {
     pub name: &'static str,
     /// What it is compared with.
     pub baseline: Baseline,
-    /// Absolute p99 limit (ns), if the issue sets one.
+    /// Absolute p99 limit (ns), if there is one.
     pub p99_limit_ns: Option<u64>,
 }
 
@@ -72,8 +83,8 @@ pub const HOPS: [HopSpec; 5] = [
     },
     HopSpec {
         name: SETPOINT_TO_RIG,
-        baseline: Baseline::PingPong(Payload::MotorSetpoint),
-        p99_limit_ns: None,
+        baseline: Baseline::None,
+        p99_limit_ns: Some(RIG_PERIOD_NS + SETPOINT_SLACK_NS),
     },
     HopSpec {
         name: MATCHING_ERROR,
@@ -93,41 +104,78 @@ pub enum Outcome {
     Unknown(String),
 }
 
-/// One goal of a hop and its outcome.
+impl Outcome {
+    /// Met if `met`, else missed.
+    pub fn of(met: bool) -> Self {
+        if met {
+            Outcome::Met
+        } else {
+            Outcome::Missed
+        }
+    }
+}
+
+/// One goal and its outcome.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GoalCheck {
-    /// The goal, e.g. `p99 ≤ 2× iox2-event`.
+    /// The goal, e.g. `p99 < uds`.
     pub goal: String,
     /// The outcome.
     pub outcome: Outcome,
 }
 
-/// One row of the summary table.
+impl GoalCheck {
+    /// `goal: met`, `goal: MISSED` or `goal: unknown (why)`.
+    pub fn describe(&self) -> String {
+        match &self.outcome {
+            Outcome::Met => format!("{}: met", self.goal),
+            Outcome::Missed => format!("{}: MISSED", self.goal),
+            Outcome::Unknown(why) => format!("{}: unknown ({why})", self.goal),
+        }
+    }
+}
+
+/// One row of the hop table.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RatioRow {
     /// Hop name.
     pub hop: &'static str,
-    /// The hop's p99 (ns), or why it was not measured.
-    pub p99_ns: Result<u64, String>,
-    /// Hop p99 / `iox2-event` round-trip p99 of the same payload.
-    pub vs_blocking: Option<f64>,
+    /// The hop's p50 and p99 (ns), or why it was not measured.
+    pub p50_p99_ns: Result<(u64, u64), String>,
+    /// Hop p50 / `futex` round-trip p50 of the same payload.
+    pub p50_vs_futex: Option<f64>,
     /// Hop p99 / `uds` round-trip p99 of the same payload.
-    pub vs_uds: Option<f64>,
+    pub p99_vs_uds: Option<f64>,
     /// The goals and their outcomes (empty when not measured).
     pub goals: Vec<GoalCheck>,
 }
 
-/// The summary rows of every hop in [`HOPS`]: each hop found (by name) in `measured` is
-/// compared with the matching round trips found there too; the rest are "not measured" with
+/// The summary of the baseline `transport/payload` in `measured`, or its name if absent.
+fn baseline(
+    measured: &[Measurement],
+    transport: Transport,
+    payload: Payload,
+) -> Result<Summary, String> {
+    let name = baseline_name(transport, payload);
+    measured
+        .iter()
+        .find(|m| m.name == name)
+        .map(Measurement::summary)
+        .filter(|summary| summary.count > 0)
+        .ok_or(name)
+}
+
+/// The rows of every hop in [`HOPS`]: each hop found (by name) in `measured` is judged
+/// against the round trips found there too; the rest are "not measured" with
 /// `missing_reason`.
 pub fn ratio_rows(measured: &[Measurement], missing_reason: &str) -> Vec<RatioRow> {
     HOPS.iter()
         .map(|spec| match measured.iter().find(|m| m.name == spec.name) {
             None => RatioRow {
                 hop: spec.name,
-                p99_ns: Err(missing_reason.to_owned()),
-                vs_blocking: None,
-                vs_uds: None,
+                p50_p99_ns: Err(missing_reason.to_owned()),
+                p50_vs_futex: None,
+                p99_vs_uds: None,
                 goals: Vec::new(),
             },
             Some(hop) => measured_row(spec, hop, measured),
@@ -135,93 +183,113 @@ pub fn ratio_rows(measured: &[Measurement], missing_reason: &str) -> Vec<RatioRo
         .collect()
 }
 
-fn measured_row(spec: &HopSpec, hop: &Measurement, baselines: &[Measurement]) -> RatioRow {
-    let p99 = hop.summary().p99;
+fn measured_row(spec: &HopSpec, hop: &Measurement, measured: &[Measurement]) -> RatioRow {
+    let summary = hop.summary();
+    let (p50, p99) = (summary.p50, summary.p99);
     let mut goals = Vec::new();
-    let (mut vs_blocking, mut vs_uds) = (None, None);
+    let (mut p50_vs_futex, mut p99_vs_uds) = (None, None);
     if let Baseline::PingPong(payload) = spec.baseline {
-        let baseline_p99 = |transport| {
-            let name = baseline_name(transport, payload);
-            baselines
-                .iter()
-                .find(|m| m.name == name)
-                .map(|m| m.summary().p99)
-                .filter(|&p99| p99 > 0)
-                .ok_or(name)
-        };
-        let blocking = baseline_p99(Transport::IoxEvent);
-        vs_blocking = blocking.as_ref().ok().map(|&b| p99 as f64 / b as f64);
+        let uds = baseline(measured, Transport::Uds, payload);
+        p99_vs_uds = uds.as_ref().ok().map(|u| p99 as f64 / u.p99.max(1) as f64);
         goals.push(GoalCheck {
-            goal: format!("≤ {BLOCKING_P99_FACTOR}× iox2-event"),
-            outcome: match (&blocking, vs_blocking) {
-                (Ok(_), Some(ratio)) if ratio <= BLOCKING_P99_FACTOR => Outcome::Met,
-                (Ok(_), _) => Outcome::Missed,
-                (Err(name), _) => Outcome::Unknown(format!("{name} not measured")),
+            goal: "p99 < uds p99".to_owned(),
+            outcome: match p99_vs_uds {
+                Some(ratio) => Outcome::of(ratio < 1.0),
+                None => Outcome::Unknown(format!("{} not measured", uds.unwrap_err())),
             },
         });
-        let uds = baseline_p99(Transport::Uds);
-        vs_uds = uds.as_ref().ok().map(|&u| p99 as f64 / u as f64);
+        let futex = baseline(measured, Transport::Futex, payload);
+        p50_vs_futex = futex
+            .as_ref()
+            .ok()
+            .map(|f| p50 as f64 / f.p50.max(1) as f64);
         goals.push(GoalCheck {
-            goal: "< uds".to_owned(),
-            outcome: match (&uds, vs_uds) {
-                (Ok(_), Some(ratio)) if ratio < 1.0 => Outcome::Met,
-                (Ok(_), _) => Outcome::Missed,
-                (Err(name), _) => Outcome::Unknown(format!("{name} not measured")),
+            goal: format!("p50 ≤ {FUTEX_P50_FACTOR}× futex p50"),
+            outcome: match p50_vs_futex {
+                Some(ratio) => Outcome::of(ratio <= FUTEX_P50_FACTOR),
+                None => Outcome::Unknown(format!("{} not measured", futex.unwrap_err())),
             },
         });
     }
     if let Some(limit) = spec.p99_limit_ns {
         goals.push(GoalCheck {
-            goal: format!("≤ {}", format_ns(limit)),
-            outcome: if p99 <= limit {
-                Outcome::Met
-            } else {
-                Outcome::Missed
-            },
+            goal: format!("p99 ≤ {}", format_ns(limit)),
+            outcome: Outcome::of(p99 <= limit),
         });
     }
     RatioRow {
         hop: spec.name,
-        p99_ns: Ok(p99),
-        vs_blocking,
-        vs_uds,
+        p50_p99_ns: Ok((p50, p99)),
+        p50_vs_futex,
+        p99_vs_uds,
         goals,
     }
 }
 
-/// The printed summary table of [`ratio_rows`].
+/// The printed table of [`ratio_rows`].
 pub fn ratio_table(rows: &[RatioRow]) -> String {
     let mut text = format!(
-        "{:<33} {:>12} {:>14} {:>8}  goals (p99)\n",
-        "hop", "p99", "×iox2-event", "×uds"
+        "{:<33} {:>12} {:>12} {:>9} {:>8}  goals\n",
+        "hop", "p50", "p99", "p50/futex", "p99/uds"
     );
     let ratio = |r: Option<f64>| r.map_or("-".to_owned(), |r| format!("{r:.2}"));
     for row in rows {
-        match &row.p99_ns {
+        match &row.p50_p99_ns {
             Err(reason) => {
                 let _ = writeln!(text, "{:<33} not measured: {reason}", row.hop);
             }
-            Ok(p99) => {
-                let goals: Vec<String> = row
-                    .goals
-                    .iter()
-                    .map(|check| match &check.outcome {
-                        Outcome::Met => format!("{}: met", check.goal),
-                        Outcome::Missed => format!("{}: MISSED", check.goal),
-                        Outcome::Unknown(why) => format!("{}: unknown ({why})", check.goal),
-                    })
-                    .collect();
+            Ok((p50, p99)) => {
+                let goals: Vec<String> = row.goals.iter().map(GoalCheck::describe).collect();
                 let _ = writeln!(
                     text,
-                    "{:<33} {:>12} {:>14} {:>8}  {}",
+                    "{:<33} {:>12} {:>12} {:>9} {:>8}  {}",
                     row.hop,
+                    format_ns(*p50),
                     format_ns(*p99),
-                    ratio(row.vs_blocking),
-                    ratio(row.vs_uds),
+                    ratio(row.p50_vs_futex),
+                    ratio(row.p99_vs_uds),
                     goals.join("; ")
                 );
             }
         }
+    }
+    text
+}
+
+/// The doorbell round trip of each payload against the Unix-socket round trip of the same
+/// payload and placement: below it at p50 and at p99.
+pub fn transport_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck>)> {
+    Payload::ALL
+        .iter()
+        .filter_map(|&payload| {
+            let doorbell = baseline(measured, Transport::Doorbell, payload).ok()?;
+            let uds = baseline(measured, Transport::Uds, payload).ok()?;
+            let check = |name: &str, ours: u64, theirs: u64| GoalCheck {
+                goal: format!("{name} {} < uds {}", format_ns(ours), format_ns(theirs)),
+                outcome: Outcome::of(ours < theirs),
+            };
+            Some((
+                payload,
+                vec![
+                    check("p50", doorbell.p50, uds.p50),
+                    check("p99", doorbell.p99, uds.p99),
+                ],
+            ))
+        })
+        .collect()
+}
+
+/// The printed table of [`transport_checks`]; empty without both baselines.
+pub fn transport_table(checks: &[(Payload, Vec<GoalCheck>)]) -> String {
+    let mut text = String::new();
+    for (payload, goals) in checks {
+        let goals: Vec<String> = goals.iter().map(GoalCheck::describe).collect();
+        let _ = writeln!(
+            text,
+            "  doorbell/{:<20} {}",
+            payload.name(),
+            goals.join("; ")
+        );
     }
     text
 }
@@ -238,36 +306,36 @@ mod tests {
         m
     }
 
-    fn hop(index: usize, p99: u64) -> Measurement {
-        constant(HOPS[index].name, p99)
+    fn hop(index: usize, value: u64) -> Measurement {
+        constant(HOPS[index].name, value)
     }
 
     #[test]
-    fn ratios_divide_the_hop_p99_by_the_matching_baselines() {
+    fn event_driven_hops_are_judged_against_uds_p99_and_futex_p50() {
         let measured = [
-            constant("iox2-event/encoder-sample", 1000),
             constant("uds/encoder-sample", 1500),
-            constant("iox2-event/tracker-frame", 100),
+            constant("futex/encoder-sample", 1000),
+            constant("futex/tracker-frame", 100),
             hop(0, 1800),
             hop(1, 400),
         ];
         let rows = ratio_rows(&measured, "no graph");
         assert_eq!(rows.len(), HOPS.len());
 
-        assert_eq!(rows[0].p99_ns, Ok(1800));
-        assert_eq!(rows[0].vs_blocking, Some(1.8));
-        assert_eq!(rows[0].vs_uds, Some(1.2));
-        assert_eq!(rows[0].goals[0].outcome, Outcome::Met);
-        assert_eq!(rows[0].goals[1].outcome, Outcome::Missed);
+        assert_eq!(rows[0].p50_p99_ns, Ok((1800, 1800)));
+        assert_eq!(rows[0].p99_vs_uds, Some(1.2));
+        assert_eq!(rows[0].p50_vs_futex, Some(1.8));
+        assert_eq!(rows[0].goals[0].outcome, Outcome::Missed);
+        assert_eq!(rows[0].goals[1].outcome, Outcome::Met);
 
-        assert_eq!(rows[1].vs_blocking, Some(4.0));
-        assert_eq!(rows[1].goals[0].outcome, Outcome::Missed);
         assert_eq!(
-            rows[1].goals[1].outcome,
+            rows[1].goals[0].outcome,
             Outcome::Unknown("uds/tracker-frame not measured".into())
         );
+        assert_eq!(rows[1].p50_vs_futex, Some(4.0));
+        assert_eq!(rows[1].goals[1].outcome, Outcome::Missed);
 
-        assert_eq!(rows[2].p99_ns, Err("no graph".into()));
+        assert_eq!(rows[2].p50_p99_ns, Err("no graph".into()));
         assert!(rows[2].goals.is_empty());
     }
 
@@ -275,20 +343,22 @@ mod tests {
     fn absolute_limits_apply_with_and_without_baseline() {
         let measured = [
             hop(2, 60_000),
-            constant("iox2-event/ik", 40_000),
             constant("uds/ik", 90_000),
+            hop(3, 540_000),
             hop(4, 400_000),
         ];
         let rows = ratio_rows(&measured, "-");
         let ik = &rows[2];
-        // Above 2048 ns the histogram keeps 3 significant digits.
-        let ratio = ik.vs_blocking.unwrap();
-        assert!((ratio - 1.5).abs() < 1e-3, "{ratio}");
         assert_eq!(ik.goals.len(), 3);
-        assert_eq!(ik.goals[2].goal, "≤ 50.000 µs");
+        assert_eq!(ik.goals[0].outcome, Outcome::Met);
+        assert_eq!(ik.goals[2].goal, "p99 ≤ 50.000 µs");
         assert_eq!(ik.goals[2].outcome, Outcome::Missed);
+        let setpoint = &rows[3];
+        assert_eq!(setpoint.goals.len(), 1);
+        assert_eq!(setpoint.goals[0].goal, "p99 ≤ 550.000 µs");
+        assert_eq!(setpoint.goals[0].outcome, Outcome::Met);
         let matching = &rows[4];
-        assert_eq!(matching.vs_blocking, None);
+        assert_eq!(matching.p99_vs_uds, None);
         assert_eq!(matching.goals.len(), 1);
         assert_eq!(matching.goals[0].outcome, Outcome::Met);
     }
@@ -296,7 +366,7 @@ mod tests {
     #[test]
     fn table_shows_ratios_and_reasons() {
         let measured = [
-            constant("iox2-event/encoder-sample", 1000),
+            constant("futex/encoder-sample", 1000),
             constant("uds/encoder-sample", 3000),
             hop(0, 1500),
         ];
@@ -311,11 +381,36 @@ mod tests {
             "{table}"
         );
         assert!(
-            lines[1].contains("≤ 2× iox2-event: met; < uds: met"),
+            lines[1].contains("p99 < uds p99: met; p50 ≤ 2× futex p50: met"),
             "{table}"
         );
         assert!(
             lines[2].ends_with("not measured: graph not running"),
+            "{table}"
+        );
+    }
+
+    #[test]
+    fn the_doorbell_must_beat_uds_at_p50_and_p99_per_payload() {
+        let measured = [
+            constant("doorbell/ik", 5_000),
+            constant("uds/ik", 6_000),
+            constant("doorbell/encoder-sample", 7_000),
+            constant("uds/encoder-sample", 6_000),
+            constant("doorbell/tracker-frame", 5_000),
+        ];
+        let checks = transport_checks(&measured);
+        // The histograms keep 3 significant digits: 5000 ns is stored as 5003.
+        assert_eq!(checks.len(), 2, "tracker-frame has no uds baseline");
+        let (payload, goals) = &checks[0];
+        assert_eq!(*payload, Payload::EncoderSample);
+        assert!(goals.iter().all(|g| g.outcome == Outcome::Missed));
+        let (payload, goals) = &checks[1];
+        assert_eq!(*payload, Payload::Ik);
+        assert!(goals.iter().all(|g| g.outcome == Outcome::Met));
+        let table = transport_table(&checks);
+        assert!(
+            table.contains("doorbell/ik") && table.contains("p99 5.003 µs < uds 6.003 µs: met"),
             "{table}"
         );
     }

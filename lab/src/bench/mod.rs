@@ -203,6 +203,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
             println!("  {}", payload.describe());
         }
     }
+    let transport_checks = hops::transport_checks(&results.measurements);
+    if !transport_checks.is_empty() {
+        println!("\nthe doorbell against Unix sockets (same payload, same placement):");
+        print!("{}", hops::transport_table(&transport_checks));
+    }
     if !results.idle.is_empty() {
         print!("\n{}", output::idle_table(&results.idle));
     }
@@ -210,7 +215,10 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         println!("{note}");
     }
     if settings.runs(Part::Hops) {
-        println!("\nlive-graph hops (p99 as a ratio to the same payload's round-trip p99):");
+        println!(
+            "\nlive-graph hops (p50 as a ratio to the same payload's futex round-trip p50, p99 \
+             to its Unix-socket round-trip p99):"
+        );
         print!("{}", hops::ratio_table(&hop_rows));
     }
     for line in &results.unavailable {

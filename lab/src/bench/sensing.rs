@@ -7,10 +7,11 @@
 //!   same way but does not say when it consumed one, so this is the encoder → consumer hop as
 //!   a second subscriber sees it.
 //! - [`TRACKER_FRAME_TO_MATCHED`]: a `MatchedSample`'s receipt by the bench minus its frame's
-//!   `arrival_t_ns` (stamped by `tracker` on arrival): tracker → sync → bench. Beside it,
-//!   [`TRACKER_FRAME_TO_SUBSCRIBER`]: the `TrackerFrame`'s own receipt by the bench minus the
-//!   same stamp (tracker → bench), which splits the chain into the tracker's part and the
-//!   sync's.
+//!   `arrival_t_ns` (stamped by `tracker` on arrival): tracker → sync → bench. Beside it, in
+//!   a window of its own after that one, [`TRACKER_FRAME_TO_SUBSCRIBER`]: the `TrackerFrame`'s
+//!   own receipt by the bench minus the same stamp (tracker → bench), which splits the chain
+//!   into the tracker's part and the sync's (measured apart because the bench, listening
+//!   above the graph's priority, would otherwise run between the tracker and the sync).
 //! - [`MATCHING_ERROR`]: |`MatchedSample.exposure_t_ns` − `RigTruth.exposure_t_ns`| of the
 //!   same frame number, the sync given the simulated tracker's latency; and
 //!   [`MATCHING_ERROR_ABOUT_MEAN`], the same about its mean (the constant part a calibrated
@@ -23,7 +24,10 @@
 use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE};
-use super::hops::{ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, TRACKER_FRAME_TO_MATCHED};
+use super::hops::{
+    ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
+    TRACKER_FRAME_TO_MATCHED,
+};
 use super::stats::{format_ns, Measurement};
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
@@ -64,6 +68,9 @@ pub const MATCHING_ERROR_ABOUT_MEAN: &str = "hop/matching-error-about-mean";
 /// A `TrackerFrame`'s receipt by the bench minus its `arrival_t_ns` (ns): the tracker's part
 /// of [`TRACKER_FRAME_TO_MATCHED`] (reply parsing, publishing, the wake-up of a subscriber).
 pub const TRACKER_FRAME_TO_SUBSCRIBER: &str = "hop/tracker-frame-to-subscriber";
+
+/// The window of [`TRACKER_FRAME_TO_SUBSCRIBER`] is the main window divided by this.
+const FRAMES_WINDOW_DIVISOR: u32 = 3;
 
 /// Truths kept for frames not matched yet (over three minutes at 20 Hz).
 const TRUTHS_KEPT: usize = 4096;
@@ -142,6 +149,7 @@ pub fn run(
 
     probe.discard_pending(&mut hops)?;
     probe.listen(&mut graph, &mut hops, plan.window)?;
+    probe.listen_to_frames(&mut graph, &mut hops, plan.window / FRAMES_WINDOW_DIVISOR)?;
     let ik = probe.ik_round_trips(&mut graph, &targets, plan)?;
     drop(probe);
     graph.stop()?;
@@ -168,7 +176,6 @@ fn cpu_label(node: &str) -> String {
 struct Probe {
     rt: NodeRuntime,
     encoders: Subscriber<EncoderSample>,
-    frames: Subscriber<TrackerFrame>,
     matched: Subscriber<MatchedSample>,
     truth: Subscriber<RigTruth>,
 }
@@ -178,7 +185,6 @@ impl Probe {
         let rt = NodeRuntime::with_domain("bench", domain.clone())?;
         Ok(Self {
             encoders: rt.subscriber(services::ENCODER_SAMPLES)?,
-            frames: rt.subscriber(services::TRACKER_FRAMES)?,
             matched: rt.subscriber(services::SYNC_MATCHED)?,
             truth: rt.subscriber(services::RIG_TRUTH)?,
             rt,
@@ -215,13 +221,15 @@ impl Probe {
     /// while the bench did not listen); truths are kept for the matched samples still to come.
     fn discard_pending(&mut self, hops: &mut SensingHops) -> anyhow::Result<()> {
         self.encoders.drain(|_| {})?;
-        self.frames.drain(|_| {})?;
         self.matched.drain(|_| {})?;
         self.truth.drain(|rig_truth| hops.truth(&rig_truth))?;
         Ok(())
     }
 
-    /// Records the sensing hops for `window`, woken by every message.
+    /// Records the encoder hop, the tracker frame → matched sample hop and the matching
+    /// error for `window`, woken by every message. The bench does not subscribe to the
+    /// tracker frames meanwhile: a subscriber above the graph's priority would run between
+    /// the tracker and the sync and lengthen the hop it measures.
     fn listen(
         &mut self,
         graph: &mut LiveGraph,
@@ -231,29 +239,78 @@ impl Probe {
         let Probe {
             rt,
             encoders,
-            frames,
             matched,
             truth,
         } = self;
         let started = Instant::now();
         let mut checked = started;
         let mut received_encoders = Vec::new();
-        let mut received_frames = Vec::new();
         let mut received_matched = Vec::new();
-        let inputs: [&dyn Waitable; 4] = [&*encoders, &*frames, &*matched, &*truth];
+        let inputs: [&dyn Waitable; 3] = [&*encoders, &*matched, &*truth];
         let exit = rt.run_on_data(&inputs, IDLE, |ctx| {
             encoders.drain(|sample| received_encoders.push((sample, monotonic_ns())))?;
-            frames.drain(|frame| received_frames.push((frame, monotonic_ns())))?;
             truth.drain(|rig_truth| hops.truth(&rig_truth))?;
             matched.drain(|sample| received_matched.push((sample, monotonic_ns())))?;
             for (sample, received_ns) in received_encoders.drain(..) {
                 hops.encoder_sample(&sample, received_ns)?;
             }
-            for (frame, received_ns) in received_frames.drain(..) {
-                hops.tracker_frame(&frame, received_ns)?;
-            }
             for (sample, received_ns) in received_matched.drain(..) {
                 hops.matched_sample(&sample, received_ns)?;
+            }
+            if checked.elapsed() >= CHECK_PERIOD {
+                checked = Instant::now();
+                graph.check_running()?;
+            }
+            if started.elapsed() >= window {
+                ctx.stop();
+            }
+            Ok::<_, anyhow::Error>(())
+        })?;
+        if exit == Exit::Signal {
+            bail!("interrupted");
+        }
+        Ok(())
+    }
+
+    /// Records [`TRACKER_FRAME_TO_SUBSCRIBER`] for `window` with a subscriber to the tracker
+    /// frames made for it (the other messages are dropped, truths kept).
+    fn listen_to_frames(
+        &mut self,
+        graph: &mut LiveGraph,
+        hops: &mut SensingHops,
+        window: Duration,
+    ) -> anyhow::Result<()> {
+        let frames: Subscriber<TrackerFrame> = self.rt.subscriber(services::TRACKER_FRAMES)?;
+        // Neither the publisher's history (a frame from before the subscription) nor the
+        // first frame after it (the tracker then connects to the bench's doorbell, once) is
+        // a hop.
+        let subscribed_ns = monotonic_ns();
+        let mut connected = false;
+        let Probe {
+            rt,
+            encoders,
+            matched,
+            truth,
+        } = self;
+        let started = Instant::now();
+        let mut checked = started;
+        let mut received = Vec::new();
+        let inputs: [&dyn Waitable; 4] = [&frames, &*encoders, &*matched, &*truth];
+        let exit = rt.run_on_data(&inputs, IDLE, |ctx| {
+            frames.drain(|frame| {
+                if frame.arrival_t_ns < subscribed_ns {
+                    return;
+                }
+                if connected {
+                    received.push((frame, monotonic_ns()));
+                }
+                connected = true;
+            })?;
+            encoders.drain(|_| {})?;
+            matched.drain(|_| {})?;
+            truth.drain(|rig_truth| hops.truth(&rig_truth))?;
+            for (frame, received_ns) in received.drain(..) {
+                hops.tracker_frame(&frame, received_ns)?;
             }
             if checked.elapsed() >= CHECK_PERIOD {
                 checked = Instant::now();
@@ -415,7 +472,16 @@ impl SensingHops {
             self.encoder.summary().count,
             self.matched.summary().count,
             matched,
-            self.mean_error_ns().map_or("-".to_owned(), signed_ns)
+            self.mean_error_ns().map_or("-".to_owned(), |mean| format!(
+                "{} (goal |mean| ≤ {}: {})",
+                signed_ns(mean),
+                format_ns(MATCHING_ERROR_MEAN_LIMIT_NS as u64),
+                if mean.abs() <= MATCHING_ERROR_MEAN_LIMIT_NS {
+                    "met"
+                } else {
+                    "MISSED"
+                }
+            ))
         )];
         if self.without_truth > 0 {
             notes.push(format!(
@@ -655,7 +721,13 @@ mod tests {
                 super::super::graph::SETPOINTS_LAUNCH_FILE,
             ),
         ] {
-            for node in parse(name, text).nodes {
+            let graph = parse(name, text);
+            assert_eq!(
+                graph.cpu_wake_latency.map(|(bound, _)| bound),
+                shipped.cpu_wake_latency.map(|(bound, _)| bound),
+                "{name}: CPU wake-up latency bound"
+            );
+            for node in graph.nodes {
                 let same = shipped.nodes.iter().find(|n| n.name == node.name).unwrap();
                 assert_eq!(node.placement, same.placement, "{name}: {}", node.name);
                 assert!(

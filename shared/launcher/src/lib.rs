@@ -16,6 +16,7 @@ pub mod progress;
 mod run_dir;
 pub mod spec;
 mod supervisor;
+pub mod wake_latency;
 
 pub use build::build_graph_executables;
 pub use out_dir::create_out_dir;
@@ -28,6 +29,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 use supervisor::Supervisor;
+use wake_latency::WakeLatencyBound;
 
 /// Arguments of `sabr launch`.
 #[derive(Debug, Clone, clap::Args)]
@@ -77,6 +79,9 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     spec::check_placements(&graph)?;
     if args.check {
         println!("{}: valid; start order:", args.file.display());
+        if let Some((latency_us, _)) = graph.cpu_wake_latency {
+            println!("  (CPU wake-up latency held at ≤ {latency_us} µs while it runs)");
+        }
         for node in &graph.nodes {
             let placement = if node.placement.is_default() {
                 String::new()
@@ -97,16 +102,30 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
         None => Domain::from_env()?,
     };
     let run = RunDir::create(&args.run_dir)?;
+    let wake_latency = graph
+        .cpu_wake_latency
+        .map(|(latency_us, line)| {
+            WakeLatencyBound::hold(latency_us)
+                .map_err(|reason| anyhow::anyhow!("{}:{line}: {reason}", args.file.display()))
+        })
+        .transpose()?;
     eprintln!(
         "sabr launch: {} — {} nodes, domain {domain}, run directory {}",
         args.file.display(),
         graph.nodes.len(),
         run.path().display()
     );
+    if let Some(bound) = &wake_latency {
+        eprintln!(
+            "sabr launch: CPU wake-up latency held at ≤ {} µs while the graph runs",
+            bound.latency_us
+        );
+    }
     let mut supervisor = Supervisor::new(&graph, &run, domain.clone(), duration)?;
     let reason = supervisor.run();
     supervisor.say(format_args!("stopping the graph: {reason}"));
     supervisor.stop_all();
+    drop(wake_latency);
     let left = sabr_node::release_domain(&domain);
     if !left.is_empty() {
         eprintln!("sabr launch: iceoryx2 files of domain {domain} left behind: {left:?}");

@@ -4,6 +4,8 @@
 //! [graph]                      # optional
 //! stop_grace_s = 3.0           # stop request (SIGINT) → SIGTERM
 //! term_grace_s = 2.0           # SIGTERM → SIGKILL
+//! cpu_wake_latency_us = 0      # optional: bound on the CPUs' wake-up latency while the graph
+//!                              # runs (0: idle CPUs poll; see `wake_latency`)
 //!
 //! [[node]]
 //! name = "encoders"            # 1..=32 of [A-Za-z0-9_-]; names the log file
@@ -29,6 +31,7 @@
 //! before the node's executable runs.
 
 use crate::placement::{self, Placement, Sched};
+use crate::wake_latency::WakeLatencyBound;
 use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
@@ -110,6 +113,8 @@ pub struct GraphSpec {
     pub stop_grace: Duration,
     /// Time between SIGTERM and SIGKILL.
     pub term_grace: Duration,
+    /// Bound on the CPUs' wake-up latency while the graph runs (µs), and the line giving it.
+    pub cpu_wake_latency: Option<(u32, usize)>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -126,6 +131,7 @@ struct FileToml {
 struct GraphToml {
     stop_grace_s: Option<Spanned<f64>>,
     term_grace_s: Option<Spanned<f64>>,
+    cpu_wake_latency_us: Option<Spanned<u32>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -272,6 +278,11 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
         nodes,
         stop_grace,
         term_grace,
+        cpu_wake_latency: parsed
+            .graph
+            .cpu_wake_latency_us
+            .as_ref()
+            .map(|bound| (*bound.get_ref(), line_column(text, bound.span().start).0)),
     })
 }
 
@@ -302,9 +313,18 @@ fn node_placement(
     Ok((Placement { cpus, sched }, line))
 }
 
-/// Tries every node's placement on this machine before anything starts; the error names the
-/// node, the launch-file line, what failed and how to allow it.
+/// Tries every node's placement, and the graph's CPU wake-up latency bound, on this machine
+/// before anything starts; the error names the node, the launch-file line, what failed and
+/// how to allow it.
 pub fn check_placements(graph: &GraphSpec) -> Result<(), LaunchFileError> {
+    if let Some((_, line)) = graph.cpu_wake_latency {
+        WakeLatencyBound::check().map_err(|reason| LaunchFileError {
+            file: graph.file.clone(),
+            line,
+            column: 1,
+            reason,
+        })?;
+    }
     for node in graph.nodes.iter().filter(|n| !n.placement.is_default()) {
         node.placement.probe().map_err(|reason| LaunchFileError {
             file: graph.file.clone(),
@@ -522,6 +542,16 @@ exec = "a"
 
         let e = error("[[node]]\nname = \"x\"\n");
         assert!(e.reason.contains("exec"), "{e}");
+    }
+
+    #[test]
+    fn the_cpu_wake_latency_bound_is_parsed_with_its_line() {
+        let node = "[[node]]\nname = \"x\"\nexec = \"a\"\n";
+        let spec = check(&format!("[graph]\ncpu_wake_latency_us = 0\n{node}")).unwrap();
+        assert_eq!(spec.cpu_wake_latency, Some((0, 2)));
+        assert_eq!(check(node).unwrap().cpu_wake_latency, None);
+        let e = error(&format!("[graph]\ncpu_wake_latency_us = -5\n{node}"));
+        assert_eq!(e.line, 2);
     }
 
     #[test]

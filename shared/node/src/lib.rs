@@ -52,8 +52,8 @@ pub use deadline::Deadline;
 pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
 pub use doorbell::Doorbell;
 pub use doorbell_rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
-pub use message::Message;
 pub use files::domain_files;
+pub use message::Message;
 pub use observer::{release_domain, GraphObserver};
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{

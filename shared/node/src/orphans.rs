@@ -11,8 +11,8 @@
 //! each service its tags name (which also removes the tags, and the service if it has no owner
 //! left), then removes its remaining files (port tags, monitor files).
 
-use crate::transport::Transport;
 use crate::files::domain_files;
+use crate::transport::Transport;
 use crate::Domain;
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::prelude::CallbackProgression;
@@ -35,7 +35,7 @@ pub(crate) fn remove_orphaned_nodes<S: Transport>(domain: &Domain) -> usize {
     }
     let mut services = Vec::new();
     let listed = S::list(&config, |details| {
-        services.push(details.static_details.service_hash().clone());
+        services.push(*details.static_details.service_hash());
         CallbackProgression::Continue
     });
     if listed.is_err() {
