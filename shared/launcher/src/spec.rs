@@ -597,7 +597,7 @@ exec = "a"
 
     #[test]
     fn shipped_graphs_are_valid() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../launch/graphs");
         let mut checked = 0;
         for entry in std::fs::read_dir(&dir).unwrap().flatten() {
             let file = entry.path();
