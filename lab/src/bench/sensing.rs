@@ -242,12 +242,10 @@ impl Probe {
             matched,
             truth,
         } = self;
-        let started = Instant::now();
-        let mut checked = started;
         let mut received_encoders = Vec::new();
         let mut received_matched = Vec::new();
         let inputs: [&dyn Waitable; 3] = [&*encoders, &*matched, &*truth];
-        let exit = rt.run_on_data(&inputs, IDLE, |ctx| {
+        listen_for(rt, graph, &inputs, window, || {
             encoders.drain(|sample| received_encoders.push((sample, monotonic_ns())))?;
             truth.drain(|rig_truth| hops.truth(&rig_truth))?;
             matched.drain(|sample| received_matched.push((sample, monotonic_ns())))?;
@@ -257,19 +255,8 @@ impl Probe {
             for (sample, received_ns) in received_matched.drain(..) {
                 hops.matched_sample(&sample, received_ns)?;
             }
-            if checked.elapsed() >= CHECK_PERIOD {
-                checked = Instant::now();
-                graph.check_running()?;
-            }
-            if started.elapsed() >= window {
-                ctx.stop();
-            }
-            Ok::<_, anyhow::Error>(())
-        })?;
-        if exit == Exit::Signal {
-            bail!("interrupted");
-        }
-        Ok(())
+            Ok(())
+        })
     }
 
     /// Records [`TRACKER_FRAME_TO_SUBSCRIBER`] for `window` with a subscriber to the tracker
@@ -292,11 +279,9 @@ impl Probe {
             matched,
             truth,
         } = self;
-        let started = Instant::now();
-        let mut checked = started;
         let mut received = Vec::new();
         let inputs: [&dyn Waitable; 4] = [&frames, &*encoders, &*matched, &*truth];
-        let exit = rt.run_on_data(&inputs, IDLE, |ctx| {
+        listen_for(rt, graph, &inputs, window, || {
             frames.drain(|frame| {
                 if frame.arrival_t_ns < subscribed_ns {
                     return;
@@ -312,19 +297,8 @@ impl Probe {
             for (frame, received_ns) in received.drain(..) {
                 hops.tracker_frame(&frame, received_ns)?;
             }
-            if checked.elapsed() >= CHECK_PERIOD {
-                checked = Instant::now();
-                graph.check_running()?;
-            }
-            if started.elapsed() >= window {
-                ctx.stop();
-            }
-            Ok::<_, anyhow::Error>(())
-        })?;
-        if exit == Exit::Signal {
-            bail!("interrupted");
-        }
-        Ok(())
+            Ok(())
+        })
     }
 
     /// Times IK requests to the graph's server, one per [`IK_PERIOD`].
@@ -374,6 +348,34 @@ impl Probe {
         }
         Ok(round_trips)
     }
+}
+
+/// Calls `step` on every wake-up by `inputs` for `window`, checking every [`CHECK_PERIOD`]
+/// that the graph still runs.
+fn listen_for(
+    rt: &mut NodeRuntime,
+    graph: &mut LiveGraph,
+    inputs: &[&dyn Waitable],
+    window: Duration,
+    mut step: impl FnMut() -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let mut checked = started;
+    let exit = rt.run_on_data(inputs, IDLE, |ctx| {
+        step()?;
+        if checked.elapsed() >= CHECK_PERIOD {
+            checked = Instant::now();
+            graph.check_running()?;
+        }
+        if started.elapsed() >= window {
+            ctx.stop();
+        }
+        Ok::<_, anyhow::Error>(())
+    })?;
+    if exit == Exit::Signal {
+        bail!("interrupted");
+    }
+    Ok(())
 }
 
 /// The sensing hops, fed with the messages as the bench receives them.

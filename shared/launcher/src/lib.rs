@@ -52,6 +52,11 @@ pub struct LaunchArgs {
     /// Only validate the launch file and print the start order.
     #[arg(long)]
     pub check: bool,
+    /// Run the nodes without the launch file's placement (`cpus`, `sched`,
+    /// `cpu_wake_latency_us`): for a machine where real-time scheduling or the CPU latency
+    /// bound is not allowed. The graph works the same, with less predictable latency.
+    #[arg(long)]
+    pub unplaced: bool,
 }
 
 /// The directory of the node executables: `dir` when given, else the directory of the running
@@ -75,8 +80,13 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     if args.bin_dir.is_none() && !args.check {
         build_graph_executables(&args.file, &bin_dir)?;
     }
-    let graph = spec::load(&args.file, &bin_dir)?;
-    spec::check_placements(&graph)?;
+    let mut graph = spec::load(&args.file, &bin_dir)?;
+    if args.unplaced {
+        graph.remove_placement();
+    }
+    spec::check_placements(&graph).map_err(|error| {
+        anyhow::anyhow!("{error}\n(or add --unplaced to run the graph without its placement)")
+    })?;
     if args.check {
         println!("{}: valid; start order:", args.file.display());
         if let Some((latency_us, _)) = graph.cpu_wake_latency {

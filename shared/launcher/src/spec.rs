@@ -313,6 +313,16 @@ fn node_placement(
     Ok((Placement { cpus, sched }, line))
 }
 
+impl GraphSpec {
+    /// Leaves every node's placement and the CPUs' wake-up latency to the system.
+    pub fn remove_placement(&mut self) {
+        self.cpu_wake_latency = None;
+        for node in &mut self.nodes {
+            node.placement = Placement::default();
+        }
+    }
+}
+
 /// Tries every node's placement, and the graph's CPU wake-up latency bound, on this machine
 /// before anything starts; the error names the node, the launch-file line, what failed and
 /// how to allow it.
@@ -552,6 +562,19 @@ exec = "a"
         assert_eq!(check(node).unwrap().cpu_wake_latency, None);
         let e = error(&format!("[graph]\ncpu_wake_latency_us = -5\n{node}"));
         assert_eq!(e.line, 2);
+    }
+
+    #[test]
+    fn a_graph_without_its_placement_is_left_to_the_system() {
+        let mut spec = check(
+            "[graph]\ncpu_wake_latency_us = 0\n[[node]]\nname = \"x\"\nexec = \"a\"\n\
+             cpus = [0]\nsched = \"fifo:40\"\n",
+        )
+        .unwrap();
+        spec.remove_placement();
+        assert_eq!(spec.cpu_wake_latency, None);
+        assert!(spec.nodes[0].placement.is_default());
+        assert_eq!(check_placements(&spec), Ok(()));
     }
 
     #[test]
