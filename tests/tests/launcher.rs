@@ -319,3 +319,50 @@ exec = "sabr-test-node"
     assert!(status.success(), "{}", graph.output());
     assert_all_gone(&mut graph);
 }
+
+#[test]
+fn a_shipped_graph_checks_with_its_placement_and_without_it() {
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../launch/graphs/sim-calibration.toml");
+    let bin_dir = sabr_integration_tests::bin("sabr");
+    let bin_dir = bin_dir.parent().unwrap();
+    let check = |extra: &[&str]| {
+        let output = std::process::Command::new(sabr_integration_tests::bin("sabr"))
+            .arg("launch")
+            .arg("--check")
+            .arg("--bin-dir")
+            .arg(bin_dir)
+            .args(extra)
+            .arg(&file)
+            .output()
+            .unwrap();
+        (
+            output.status.success(),
+            String::from_utf8_lossy(&output.stdout).into_owned(),
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+        )
+    };
+    let (ok, stdout, stderr) = check(&["--unplaced"]);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(stdout.contains("  motion ("), "{stdout}");
+    assert!(
+        !stdout.contains("cpus =") && !stdout.contains("sched =") && !stdout.contains("latency"),
+        "--unplaced kept a placement: {stdout}"
+    );
+    // With its placement the graph either checks and shows it, or is refused with the way
+    // out named (a machine without real-time privileges).
+    let (ok, stdout, stderr) = check(&[]);
+    if ok {
+        assert!(
+            stdout.contains("rig (") && stdout.contains("sched = \"fifo:30\""),
+            "{stdout}"
+        );
+        assert!(stdout.contains("ik (") && stdout.contains("sched = \"fifo:45\""));
+        assert!(
+            stdout.contains("CPU wake-up latency held at ≤ 0 µs"),
+            "{stdout}"
+        );
+    } else {
+        assert!(stderr.contains("--unplaced"), "{stderr}");
+    }
+}

@@ -14,20 +14,28 @@ use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The workspace this `sabr` was compiled from (the parent of the `launch` package).
+/// The directory of the `sabr` command's package in the workspace.
+const SABR_PACKAGE_DIR: &str = "launch";
+
+/// The workspace this launcher was compiled in: the nearest directory above its package whose
+/// `Cargo.toml` declares the `[workspace]`.
 fn workspace_root() -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent()?;
-    root.join("Cargo.toml")
-        .is_file()
-        .then(|| root.to_path_buf())
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .skip(1)
+        .find(|dir| {
+            std::fs::read_to_string(dir.join("Cargo.toml"))
+                .is_ok_and(|manifest| manifest.lines().any(|l| l.trim() == "[workspace]"))
+        })
+        .map(Path::to_path_buf)
 }
 
-/// True when cargo itself started this process as the `sabr` package (`cargo run`): cargo
-/// sets `CARGO_MANIFEST_DIR` to the running package's directory. Other packages' tests that
-/// start a launcher see their own directory there.
-fn started_by_cargo_run() -> bool {
+/// True when cargo itself started this process as the `sabr` package of `root` (`cargo run`):
+/// cargo sets `CARGO_MANIFEST_DIR` to the running package's directory. Other packages' tests
+/// that start a launcher see their own directory there.
+fn started_by_cargo_run(root: &Path) -> bool {
     std::env::var_os("CARGO_MANIFEST_DIR")
-        .is_some_and(|dir| Path::new(&dir) == Path::new(env!("CARGO_MANIFEST_DIR")))
+        .is_some_and(|dir| Path::new(&dir) == root.join(SABR_PACKAGE_DIR))
 }
 
 /// The bare executable names (no `/`) of the `[[node]]` entries of a launch file; nothing when
@@ -78,7 +86,7 @@ pub fn build_graph_executables(file: &Path, bin_dir: &Path) -> anyhow::Result<()
         .filter(|exec| !bin_dir.join(exec).is_file())
         .map(String::as_str)
         .collect();
-    if executables.is_empty() || (missing.is_empty() && !started_by_cargo_run()) {
+    if executables.is_empty() || (missing.is_empty() && !started_by_cargo_run(&root)) {
         return Ok(());
     }
     let target_dir = bin_dir
@@ -166,6 +174,18 @@ mod tests {
         assert!(
             bare_executables(&file).is_empty(),
             "bad TOML: loading says why"
+        );
+    }
+
+    #[test]
+    fn the_workspace_is_found_above_the_launcher_and_holds_the_sabr_package() {
+        let root = workspace_root().expect("the workspace of this source tree");
+        assert!(root.join(SABR_PACKAGE_DIR).join("Cargo.toml").is_file());
+        let manifest = std::fs::read_to_string(root.join(SABR_PACKAGE_DIR).join("Cargo.toml"));
+        assert!(
+            manifest.unwrap().contains("name = \"sabr\""),
+            "{} is not the sabr package",
+            root.join(SABR_PACKAGE_DIR).display()
         );
     }
 
