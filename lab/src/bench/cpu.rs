@@ -51,6 +51,34 @@ pub fn measure_cpu_shares(pids: &[u32], window: Duration) -> anyhow::Result<Vec<
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    /// A thread of this process keeping one core busy until stopped.
+    struct Spinner {
+        stop: Arc<AtomicBool>,
+        thread: std::thread::JoinHandle<()>,
+    }
+
+    impl Spinner {
+        fn start() -> Self {
+            let stop = Arc::new(AtomicBool::new(false));
+            let thread = {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    while !stop.load(Ordering::Relaxed) {
+                        std::hint::spin_loop();
+                    }
+                })
+            };
+            Self { stop, thread }
+        }
+
+        fn stop(self) {
+            self.stop.store(true, Ordering::Relaxed);
+            self.thread.join().unwrap();
+        }
+    }
 
     #[test]
     fn one_window_serves_several_processes_in_order() {
@@ -58,21 +86,12 @@ mod tests {
             .arg("5")
             .spawn()
             .unwrap();
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let spinner = {
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    std::hint::spin_loop();
-                }
-            })
-        };
+        let spinner = Spinner::start();
         let shares = measure_cpu_shares(
             &[sleeper.id(), std::process::id()],
             Duration::from_millis(300),
         );
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        spinner.join().unwrap();
+        spinner.stop();
         let _ = sleeper.kill();
         let _ = sleeper.wait();
         let shares = shares.unwrap();
@@ -92,18 +111,9 @@ mod tests {
 
     #[test]
     fn a_spinning_thread_shows_up_and_stays_within_the_machine() {
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let spinner = {
-            let stop = stop.clone();
-            std::thread::spawn(move || {
-                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    std::hint::spin_loop();
-                }
-            })
-        };
+        let spinner = Spinner::start();
         let share = measure_cpu_share(std::process::id(), Duration::from_millis(300)).unwrap();
-        stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        spinner.join().unwrap();
+        spinner.stop();
         let cores = std::thread::available_parallelism().unwrap().get() as f64;
         assert!(share.cores > 0.0, "{share:?}");
         assert!(share.cores <= cores + share.resolution, "{share:?}");

@@ -124,14 +124,21 @@ pub struct GoalCheck {
     pub outcome: Outcome,
 }
 
+/// The printed verdict: `met`, `MISSED` or `unknown (why)`.
+impl std::fmt::Display for Outcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Outcome::Met => f.write_str("met"),
+            Outcome::Missed => f.write_str("MISSED"),
+            Outcome::Unknown(why) => write!(f, "unknown ({why})"),
+        }
+    }
+}
+
 impl GoalCheck {
     /// `goal: met`, `goal: MISSED` or `goal: unknown (why)`.
     pub fn describe(&self) -> String {
-        match &self.outcome {
-            Outcome::Met => format!("{}: met", self.goal),
-            Outcome::Missed => format!("{}: MISSED", self.goal),
-            Outcome::Unknown(why) => format!("{}: unknown ({why})", self.goal),
-        }
+        format!("{}: {}", self.goal, self.outcome)
     }
 }
 

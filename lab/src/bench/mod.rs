@@ -382,11 +382,7 @@ fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
             compute::SOLVES_PER_BATCH,
             format_ns(ik_median),
             format_ns(hops::IK_SOLVE_LIMIT_NS),
-            if ik_median <= hops::IK_SOLVE_LIMIT_NS {
-                "met"
-            } else {
-                "MISSED"
-            }
+            hops::Outcome::of(ik_median <= hops::IK_SOLVE_LIMIT_NS)
         ));
     }
     results.add(

@@ -2,7 +2,7 @@
 //! and the table printed on stdout.
 
 use super::cpu::CpuShare;
-use super::hops::IDLE_CPU_LIMIT_CORES;
+use super::hops::{Outcome, IDLE_CPU_LIMIT_CORES};
 use super::stats::{format_ns, Measurement, Summary};
 use anyhow::Context;
 use hdrhistogram::Histogram;
@@ -146,11 +146,7 @@ pub fn idle_table(shares: &[(String, CpuShare)]) -> String {
     let mut text =
         format!("CPU use per process (1.0 = one core; idle goal ≤ {IDLE_CPU_LIMIT_CORES}):\n");
     for (process, share) in shares {
-        let goal = if share.cores <= IDLE_CPU_LIMIT_CORES {
-            "met"
-        } else {
-            "MISSED"
-        };
+        let goal = Outcome::of(share.cores <= IDLE_CPU_LIMIT_CORES);
         let _ = writeln!(
             text,
             "  {process:<34} {:.3} (±{:.3} over {:.1} s): {goal}",

@@ -25,7 +25,7 @@ use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE};
 use super::hops::{
-    ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
+    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
     TRACKER_FRAME_TO_MATCHED,
 };
 use super::stats::{format_ns, Measurement};
@@ -478,11 +478,7 @@ impl SensingHops {
                 "{} (goal |mean| ≤ {}: {})",
                 signed_ns(mean),
                 format_ns(MATCHING_ERROR_MEAN_LIMIT_NS as u64),
-                if mean.abs() <= MATCHING_ERROR_MEAN_LIMIT_NS {
-                    "met"
-                } else {
-                    "MISSED"
-                }
+                Outcome::of(mean.abs() <= MATCHING_ERROR_MEAN_LIMIT_NS)
             ))
         )];
         if self.without_truth > 0 {

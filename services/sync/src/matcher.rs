@@ -326,6 +326,19 @@ mod tests {
     use crate::test_streams::{encoder_samples, true_counts, TrackerStream};
     use sabr_msgs::LatencySource;
 
+    /// A matcher configuration whose clock locks after three frames and that accepts any
+    /// uncertainty: the tests' timing, not the defaults' caution.
+    fn quickly_locking_config() -> MatcherConfig {
+        MatcherConfig {
+            clock: ClockConfig {
+                min_frames: 3,
+                ..ClockConfig::default()
+            },
+            max_uncertainty_ns: f64::INFINITY,
+            ..MatcherConfig::default()
+        }
+    }
+
     const LATENCY: Latency = Latency {
         ns: 35_000_000,
         source: LatencySource::Configured,
@@ -436,14 +449,7 @@ mod tests {
         // The same frames with other arrival stamps (up to 5 ms late, varying) match at the
         // same exposures: the arrival stamp takes no part in the timing.
         let exposures = |late_ns: fn(u32) -> i64| {
-            let config = MatcherConfig {
-                clock: ClockConfig {
-                    min_frames: 3,
-                    ..ClockConfig::default()
-                },
-                max_uncertainty_ns: f64::INFINITY,
-                ..MatcherConfig::default()
-            };
+            let config = quickly_locking_config();
             let mut matcher = Matcher::new(config, [2000; 5]);
             for sample in encoder_samples(0, 1_000_000, 700, 0) {
                 matcher.push_encoder(sample);
@@ -540,14 +546,7 @@ mod tests {
 
     #[test]
     fn a_frame_waits_for_the_sample_after_its_exposure_then_times_out() {
-        let config = MatcherConfig {
-            clock: ClockConfig {
-                min_frames: 3,
-                ..ClockConfig::default()
-            },
-            max_uncertainty_ns: f64::INFINITY,
-            ..MatcherConfig::default()
-        };
+        let config = quickly_locking_config();
         let mut matcher = Matcher::new(config, [2000; 5]);
         let latency = Latency {
             ns: 0,
@@ -581,14 +580,7 @@ mod tests {
 
     #[test]
     fn lost_encoder_samples_are_counted_and_gaps_refused() {
-        let config = MatcherConfig {
-            clock: ClockConfig {
-                min_frames: 3,
-                ..ClockConfig::default()
-            },
-            max_uncertainty_ns: f64::INFINITY,
-            ..MatcherConfig::default()
-        };
+        let config = quickly_locking_config();
         let mut matcher = Matcher::new(config, [2000; 5]);
         for (seq, t) in [
             (1u64, 0i64),

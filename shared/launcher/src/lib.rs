@@ -115,8 +115,12 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     let wake_latency = graph
         .cpu_wake_latency
         .map(|(latency_us, line)| {
-            WakeLatencyBound::hold(latency_us)
-                .map_err(|reason| anyhow::anyhow!("{}:{line}: {reason}", args.file.display()))
+            WakeLatencyBound::hold(latency_us).map_err(|reason| spec::LaunchFileError {
+                file: graph.file.clone(),
+                line,
+                column: 1,
+                reason,
+            })
         })
         .transpose()?;
     eprintln!(
