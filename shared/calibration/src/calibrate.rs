@@ -98,6 +98,37 @@ const REQUIRED_PHASES: [(Phase, &str, &str); 4] = [
     ),
 ];
 
+/// Refuses a session with fewer than `options.min_tip_readings` tip-sphere readings.
+fn require_tip_readings(
+    readings: usize,
+    options: &CalibrationOptions,
+) -> Result<(), CalibrationError> {
+    if readings < options.min_tip_readings {
+        return Err(CalibrationError::InsufficientData {
+            phase: "tip",
+            reason: format!(
+                "{readings} tip-sphere readings, need at least {}: the needle length is not \
+                 identifiable",
+                options.min_tip_readings
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Tracker frames with a tip-sphere reading whose clock-line time (no latency applied)
+/// falls in the tip phase.
+fn tip_readings_at_clock_line(session: &SessionData) -> usize {
+    session
+        .frames
+        .iter()
+        .enumerate()
+        .filter(|(index, frame)| {
+            frame.tip.is_some() && session.phases.at(session.exposure_ns(*index, 0.0)) == Phase::Tip
+        })
+        .count()
+}
+
 /// Calibrates the robot of `recording`.
 pub fn calibrate(
     recording: &Recording,
@@ -122,6 +153,11 @@ pub fn calibrate(
         (options.max_encoder_gap_ms * 1e6) as i64,
     )?;
     tracing::debug!(elapsed_s = started.elapsed().as_secs_f64(), "synchronised");
+    // A session without tip readings cannot give the needle length whatever its latency:
+    // say so before the latency search, which a short or odd session can fail for its own
+    // reasons. The tip phase is taken at the frames' clock line here (no latency yet); the
+    // exact count at the estimated latency is checked again below.
+    require_tip_readings(tip_readings_at_clock_line(&session), options)?;
     let model_free = latency::estimate(&session)?;
     tracing::debug!(
         elapsed_s = started.elapsed().as_secs_f64(),
@@ -154,16 +190,7 @@ pub fn calibrate(
             .filter(|o| o.tip.is_some())
             .collect(),
     };
-    if sets.tip.len() < options.min_tip_readings {
-        return Err(CalibrationError::InsufficientData {
-            phase: "tip",
-            reason: format!(
-                "{} tip-sphere readings, need at least {}: the needle length is not identifiable",
-                sets.tip.len(),
-                options.min_tip_readings
-            ),
-        });
-    }
+    require_tip_readings(sets.tip.len(), options)?;
     let dwell_noise = from_static(&dwell).unwrap_or_else(vicra_default);
     let nominal = nominal_model(&robot, &dwell, model_free.latency_s);
     let stepwise_model = stepwise(&nominal, &sets, &dwell_noise)?;

@@ -86,6 +86,30 @@ fn a_tip_phase_without_tip_readings_leaves_the_needle_length_unidentified() {
 }
 
 #[test]
+fn missing_tip_readings_are_named_even_when_the_latency_cannot_be_estimated() {
+    let mut recording = short_recording();
+    for row in recording
+        .tracker
+        .iter_mut()
+        .filter(|r| r.tool == Tool::Tip || r.tool == Tool::Back)
+    {
+        row.reading = ToolReading::Missing;
+    }
+    let error = error_of(&recording);
+    assert!(
+        matches!(
+            error,
+            CalibrationError::InsufficientData { phase: "tip", .. }
+        ),
+        "{error}"
+    );
+    assert!(
+        error.to_string().contains("0 tip-sphere readings"),
+        "{error}"
+    );
+}
+
+#[test]
 fn a_homing_phase_without_a_dwell_is_refused() {
     let mut recording = short_recording();
     let homing: Vec<(i64, i64)> = recording
