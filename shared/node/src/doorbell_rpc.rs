@@ -110,17 +110,23 @@ impl<Req: Message, Resp: Message> DoorbellClient<Req, Resp> {
         pending: &Pending<Req, Resp>,
         timeout: Duration,
     ) -> Result<Option<Resp>, NodeError> {
-        let start = Instant::now();
-        loop {
+        let receive = || -> Result<Option<Resp>, NodeError> {
             let response = pending
                 .receive()
                 .map_err(|e| NodeError::port(&self.service, "receive a response", e))?;
-            if let Some(response) = response {
-                return Ok(Some(*response.payload()));
+            Ok(response.map(|response| *response.payload()))
+        };
+        let start = Instant::now();
+        loop {
+            if let Some(response) = receive()? {
+                return Ok(Some(response));
             }
             let left = timeout.saturating_sub(start.elapsed());
             if left.is_zero() || !pending.is_connected() {
-                return Ok(None);
+                // A server on another core may have answered and let go of the request
+                // between the receive above and this check: look once more. (The receive
+                // comes first because it also connects to a server that appeared since.)
+                return receive();
             }
             if self.inbox.wait(left).is_err() {
                 // A signal: let the caller look at the stop request.

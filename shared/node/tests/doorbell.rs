@@ -417,3 +417,58 @@ fn request_response_between_two_processes() {
     }
     release(&domain);
 }
+
+/// A server on another thread wakes the client with a sample just before it answers, so the
+/// client looks for the response while the server is sending it and letting go of the
+/// request: every response must still arrive, none may be taken for a server gone away.
+#[test]
+fn a_response_sent_as_the_server_lets_go_is_received() {
+    const REQUESTS: u64 = 3000;
+    let domain = unique_domain("rr-race");
+    std::thread::scope(|scope| {
+        let server_domain = domain.clone();
+        scope.spawn(move || {
+            let mut rt = Runtime::in_domain("server", server_domain).unwrap();
+            let server = rt.server::<EncoderSample, EncoderSample>(ECHO).unwrap();
+            let nudge = rt.publisher::<EncoderSample>(PING).unwrap();
+            let mut answered = 0;
+            rt.run_on_data(&[&server], PEER_IDLE, |ctx| {
+                if !ctx.woke_on_data() {
+                    ctx.stop();
+                }
+                nudge.send(sample(answered))?;
+                // A varying head start for the woken client, up to a few microseconds.
+                let head_start = Instant::now();
+                while head_start.elapsed() < Duration::from_nanos(answered % 16 * 300) {
+                    std::hint::spin_loop();
+                }
+                answered += server.answer(|request| sample(request.seq + 1))?.sent as u64;
+                if answered == REQUESTS {
+                    ctx.stop();
+                }
+                Ok::<_, sabr_node::NodeError>(())
+            })
+            .unwrap();
+        });
+        let rt = Runtime::in_domain("client", domain.clone()).unwrap();
+        let nudges = rt.subscriber::<EncoderSample>(PING).unwrap();
+        let client = rt.client::<EncoderSample, EncoderSample>(ECHO).unwrap();
+        let start = Instant::now();
+        let mut seq = 0;
+        while seq < REQUESTS {
+            let Some(pending) = client.send(sample(seq)).unwrap() else {
+                assert!(
+                    start.elapsed() < Duration::from_secs(20),
+                    "no server appeared"
+                );
+                std::thread::sleep(Duration::from_millis(1));
+                continue;
+            };
+            let response = client.receive(&pending, ROUND_TRIP_LIMIT).unwrap();
+            assert_eq!(response.map(|r| r.seq), Some(seq + 1), "request {seq}");
+            nudges.drain(|_| {}).unwrap();
+            seq += 1;
+        }
+    });
+    release(&domain);
+}
