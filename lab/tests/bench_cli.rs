@@ -52,6 +52,13 @@ fn quick_baselines_measure_every_transport_and_payload() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stdout}\n{stderr}");
     assert!(!stdout.contains("not available"), "{stdout}");
+    // Whether the machine lets it hold the graphs' wake-up latency bound or not, the output
+    // says under which the round trips ran.
+    assert!(
+        stdout.contains("the ping-pong baselines ran with the CPUs' wake-up latency held")
+            || stdout.contains("the ping-pong baselines ran without the wake-up latency bound"),
+        "{stdout}"
+    );
     for payload in PAYLOADS {
         let judged = stdout.lines().any(|line| {
             line.trim_start()

@@ -39,6 +39,13 @@ pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Re
         .with_context(|| format!("the bench graph has no node {node}"))
 }
 
+/// The CPU wake-up latency bound (µs) `launch_file` holds while its graph runs, if any
+/// (`[graph] cpu_wake_latency_us`; executables looked up in `bin_dir`).
+pub fn wake_latency_of(launch_file: &str, bin_dir: &Path) -> anyhow::Result<Option<u32>> {
+    let graph = spec::parse(Path::new("bench graph"), launch_file, bin_dir)?;
+    Ok(graph.cpu_wake_latency.map(|(latency_us, _line)| latency_us))
+}
+
 /// Real-time priority of the bench's listening thread: above any the graphs' nodes use, so
 /// it runs as soon as it is woken.
 const PROBE_PRIORITY: u8 = 50;

@@ -29,6 +29,7 @@ use cpu::CpuShare;
 use payload::{Payload, Transport};
 use sabr_launcher::placement::Placement;
 use sabr_launcher::progress::Progress;
+use sabr_launcher::wake_latency::WakeLatencyBound;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::path::{Path, PathBuf};
@@ -242,6 +243,28 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
 /// each placed as [`pinning`] says.
 fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<()> {
     let domain = Domain::new(&format!("sabr-bench-{}", std::process::id()))?;
+    // The round trips run under the CPU wake-up latency bound the shipped graphs hold while
+    // they run, so that a hop and its baselines are measured on equally awake CPUs.
+    let _bound = match graph::wake_latency_of(graph::SENSING_LAUNCH_FILE, &settings.bin_dir)? {
+        Some(latency_us) => match WakeLatencyBound::hold(latency_us) {
+            Ok(bound) => {
+                results.notes.push(format!(
+                    "the ping-pong baselines ran with the CPUs' wake-up latency held at ≤ \
+                     {latency_us} µs, as the shipped graphs hold it"
+                ));
+                Some(bound)
+            }
+            Err(reason) => {
+                results.notes.push(format!(
+                    "the ping-pong baselines ran without the wake-up latency bound of the \
+                     shipped graphs ({reason}): cross-core and idle wake-ups cost more than in \
+                     the graph"
+                ));
+                None
+            }
+        },
+        None => None,
+    };
     let socket_dir = std::env::temp_dir();
     for transport in Transport::ALL {
         for payload in Payload::ALL {
