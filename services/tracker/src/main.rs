@@ -2,9 +2,10 @@
 //! the `sabr_ndi` driver and publishes every new frame, stamped on arrival with the host's
 //! `CLOCK_MONOTONIC`, as a [`TrackerFrame`] on `sabr/tracker/frames`.
 //!
-//! A corrupt or refused reply is logged, counted and skipped. A tracker that stops answering
-//! (time-out, serial I/O error) or whose frame counter stands still is dead: the node says so
-//! and leaves with failure, for the launcher to restart it. On a stop request it leaves
+//! A corrupt or refused reply is logged, counted and skipped; an unanswered poll is logged and
+//! sent again (twice, by the driver's default). A tracker that stops answering (time-outs in a
+//! row, serial I/O error) or whose frame counter stands still is dead: the node says so and
+//! leaves with failure, for the launcher to restart it. On a stop request it leaves
 //! tracking mode (TSTOP) before exiting.
 
 mod convert;
@@ -110,7 +111,17 @@ impl Tracking {
         out: &Publisher<TrackerFrame>,
         handles: &HandleMap,
     ) -> anyhow::Result<()> {
-        match driver.next_frame() {
+        let retried_before = driver.stats().retried_polls;
+        let next = driver.next_frame();
+        let retried = driver.stats().retried_polls - retried_before;
+        if retried > 0 {
+            tracing::warn!(
+                retried,
+                total = driver.stats().retried_polls,
+                "the tracker left BX polls unanswered; sent them again"
+            );
+        }
+        match next {
             Ok(stamped) => {
                 self.published += 1;
                 out.send(tracker_frame(self.published, &stamped, handles))?;

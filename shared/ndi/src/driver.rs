@@ -58,11 +58,17 @@ pub struct DriverConfig {
     pub poll_interval: Duration,
     /// [`NdiDriver::next_frame`] fails if no new frame number arrives within this.
     pub stall_timeout: Duration,
+    /// BX polls [`NdiDriver::next_frame`] sends again after one went unanswered within
+    /// `reply_timeout` (a reply lost on the line, or a host too busy to read it in time),
+    /// before it gives up with [`DriverError::Timeout`]: a silent tracker is declared dead
+    /// after `(1 + poll_retries) × reply_timeout`.
+    pub poll_retries: u32,
 }
 
 impl DriverConfig {
     /// Defaults for `path`: 115200 baud, BX 0x0001, dynamic priority, 200 ms reply deadline,
-    /// 3 s for slow commands, 1 ms poll interval, 500 ms stall limit (10 frames at 20 Hz).
+    /// 3 s for slow commands, 1 ms poll interval, 500 ms stall limit (10 frames at 20 Hz),
+    /// 2 BX polls sent again after a time-out.
     pub fn new(path: impl Into<String>) -> Self {
         DriverConfig {
             path: path.into(),
@@ -74,6 +80,7 @@ impl DriverConfig {
             baud_settle: Duration::from_millis(50),
             poll_interval: Duration::from_millis(1),
             stall_timeout: Duration::from_millis(500),
+            poll_retries: 2,
         }
     }
 }
@@ -161,6 +168,8 @@ pub struct DriverStats {
     pub frames: u64,
     /// Commands that got no reply in time.
     pub timeouts: u64,
+    /// BX polls sent again after a time-out (see [`DriverConfig::poll_retries`]).
+    pub retried_polls: u64,
     /// Commands answered `ERRORxx`.
     pub device_errors: u64,
     /// Framing counters: good replies, rejected replies (bad CRC, garbage, ...), bytes dropped.
@@ -347,11 +356,23 @@ impl NdiDriver {
 
     /// Polls until the frame number differs from the last one returned (waiting
     /// `poll_interval` between polls). A bad reply is returned as an error (and counted); the
-    /// next call goes on polling. No new frame within `stall_timeout` of the last one (or of
+    /// next call goes on polling. An unanswered poll is sent again up to
+    /// [`DriverConfig::poll_retries`] times in a row (counted) before it is
+    /// [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
     /// TSTART) is [`DriverError::Stalled`].
     pub fn next_frame(&mut self) -> Result<Stamped, DriverError> {
+        let mut unanswered = 0;
         loop {
-            let stamped = self.poll()?;
+            let stamped = match self.poll() {
+                Ok(stamped) => stamped,
+                Err(DriverError::Timeout { .. }) if unanswered < self.config.poll_retries => {
+                    unanswered += 1;
+                    self.stats.retried_polls += 1;
+                    continue;
+                }
+                Err(error) => return Err(error),
+            };
+            unanswered = 0;
             let frame = stamped.reply.frame();
             if frame != self.last_frame {
                 self.last_frame = frame;

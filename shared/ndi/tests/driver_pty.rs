@@ -267,10 +267,11 @@ fn bx_options_without_frame_numbers_are_refused() {
     assert!(matches!(result, Err(DriverError::Config(_))), "{result:?}");
 }
 
-/// Serves like [`Pty::serve`] but flips one byte of every fourth BX reply on the wire.
-fn serve_noisy<S: sabr_ndi::FrameSource + Send + 'static>(
+/// Serves like [`Pty::serve`] but hands every BX reply to `tamper` first, with its number
+/// (from 1) among the BX replies: it may change the reply's bytes, or empty it (no reply).
+fn serve_tampered<S: sabr_ndi::FrameSource + Send + 'static>(
     source: S,
-    corrupted: Arc<std::sync::atomic::AtomicU64>,
+    mut tamper: impl FnMut(u64, &mut Vec<u8>) + Send + 'static,
 ) -> Rig<S> {
     use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
     use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
@@ -311,11 +312,7 @@ fn serve_noisy<S: sabr_ndi::FrameSource + Send + 'static>(
             let mut reply = server.feed(&buf[..n]);
             if reply.starts_with(&[0xC4, 0xA5]) {
                 bx_replies += 1;
-                if bx_replies.is_multiple_of(4) {
-                    let last = reply.len() - 3;
-                    reply[last] ^= 0x40; // inside the body: the body CRC catches it
-                    corrupted.fetch_add(1, Ordering::Relaxed);
-                }
+                tamper(bx_replies, &mut reply);
             }
             if master.write_all(&reply).is_ok() {
                 stats.bytes_out += reply.len() as u64;
@@ -329,7 +326,15 @@ fn serve_noisy<S: sabr_ndi::FrameSource + Send + 'static>(
 #[test]
 fn corrupted_replies_on_the_wire_are_counted_and_tracking_goes_on() {
     let corrupted = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let rig = serve_noisy(camera(), corrupted.clone());
+    let counter = corrupted.clone();
+    // Flips one byte of every fourth BX reply, inside the body: the body CRC catches it.
+    let rig = serve_tampered(camera(), move |bx, reply| {
+        if bx.is_multiple_of(4) {
+            let last = reply.len() - 3;
+            reply[last] ^= 0x40;
+            counter.fetch_add(1, Ordering::Relaxed);
+        }
+    });
     let mut driver = NdiDriver::connect(config(&rig.path)).unwrap();
     let (mut frames, mut rejected) = (0u64, 0u64);
     while frames < 20 {
@@ -362,4 +367,51 @@ fn corrupted_replies_on_the_wire_are_counted_and_tracking_goes_on() {
         "{rejected} of {} polls",
         stats.polls
     );
+}
+
+#[test]
+fn an_unanswered_poll_is_sent_again_and_tracking_goes_on() {
+    // The 5th and 9th BX replies are lost on the line.
+    let rig = serve_tampered(camera(), |bx, reply| {
+        if bx == 5 || bx == 9 {
+            reply.clear();
+        }
+    });
+    let mut driver = NdiDriver::connect(impatient(&rig.path)).unwrap();
+    let mut last = None;
+    for _ in 0..15 {
+        let frame = driver.next_frame().unwrap().reply.frame();
+        assert!(frame > last, "{frame:?} after {last:?}");
+        last = frame;
+    }
+    let stats = driver.stats();
+    drop(driver);
+    rig.shut_down();
+    assert_eq!(stats.timeouts, 2, "{stats:?}");
+    assert_eq!(stats.retried_polls, 2, "{stats:?}");
+}
+
+#[test]
+fn a_tracker_that_goes_silent_is_a_timeout_after_the_retries() {
+    // Every BX reply from the 5th on is lost.
+    let rig = serve_tampered(camera(), |bx, reply| {
+        if bx >= 5 {
+            reply.clear();
+        }
+    });
+    let config = impatient(&rig.path);
+    let mut driver = NdiDriver::connect(config.clone()).unwrap();
+    let mut result = driver.next_frame().map(|_| ());
+    while result.is_ok() {
+        result = driver.next_frame().map(|_| ());
+    }
+    assert!(
+        matches!(result, Err(DriverError::Timeout { .. })),
+        "{result:?}"
+    );
+    let stats = driver.stats();
+    drop(driver);
+    rig.shut_down();
+    assert_eq!(stats.retried_polls, u64::from(config.poll_retries));
+    assert_eq!(stats.timeouts, u64::from(config.poll_retries) + 1);
 }
