@@ -94,12 +94,18 @@ impl<Req: Message, Resp: Message> DoorbellClient<Req, Resp> {
         if pending.number_of_server_connections() == 0 {
             return Ok(None);
         }
-        self.servers.ring(|visit| {
-            self.factory.dynamic_config().list_servers(|server| {
-                visit(server.node_id, &server.server_name, true);
-                CallbackProgression::Continue
-            })
-        })?;
+        let config = self.factory.dynamic_config();
+        self.servers
+            .ring(config.number_of_servers(), None, |visit| {
+                config.list_servers(|server| {
+                    visit(
+                        server.node_id,
+                        &server.server_name,
+                        server.server_id.value(),
+                    );
+                    CallbackProgression::Continue
+                })
+            })?;
         Ok(Some(pending))
     }
 
@@ -175,17 +181,19 @@ impl<Req: Message, Resp: Message> DoorbellServer<Req, Resp> {
                 continue;
             }
             answered.sent += 1;
-            let origin = request.origin();
-            self.clients.ring(|visit| {
-                self.factory.dynamic_config().list_clients(|client| {
-                    visit(
-                        client.node_id,
-                        &client.client_name,
-                        client.client_id == origin,
-                    );
-                    CallbackProgression::Continue
-                })
-            })?;
+            let config = self.factory.dynamic_config();
+            let origin = request.origin().value();
+            self.clients
+                .ring(config.number_of_clients(), Some(origin), |visit| {
+                    config.list_clients(|client| {
+                        visit(
+                            client.node_id,
+                            &client.client_name,
+                            client.client_id.value(),
+                        );
+                        CallbackProgression::Continue
+                    })
+                })?;
         }
         Ok(answered)
     }

@@ -212,9 +212,14 @@ impl sealed::Sealed for Doorbell {
         service: &publish_subscribe::PortFactory<Self, T, ()>,
         _name: &str,
     ) -> Result<(), NodeError> {
-        wake.ring(|visit| {
-            service.dynamic_config().list_subscribers(|details| {
-                visit(details.node_id, &details.subscriber_name, true);
+        let config = service.dynamic_config();
+        wake.ring(config.number_of_subscribers(), None, |visit| {
+            config.list_subscribers(|details| {
+                visit(
+                    details.node_id,
+                    &details.subscriber_name,
+                    details.subscriber_id.value(),
+                );
                 CallbackProgression::Continue
             })
         })

@@ -12,7 +12,7 @@ use iceoryx2::service::port_factory::event;
 use sabr_msgs::services;
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Highest event id of a doorbell: at most 63 inbound ports per process (id 0 is unused).
 const EVENT_ID_MAX: usize = 63;
@@ -180,28 +180,45 @@ impl Drop for Inbox {
     }
 }
 
-/// One consumer port a producer may ring: its node, its event id, and whether this ring is
-/// for it (a server answers one client of several).
+/// How long a producer rings the consumer ports it read last before it reads them again
+/// although their number did not change (a consumer that restarted between two sends).
+const CONSUMERS_REFRESH: Duration = Duration::from_millis(20);
+
+/// One consumer port a producer may ring: its node, its event id, and its port id (a server
+/// answers one client of several).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Consumer {
     node: UniqueNodeId,
     id: EventId,
-    ring: bool,
+    port: u128,
+}
+
+/// When the consumer ports were last read, and how many the service listed then.
+#[derive(Debug, Clone, Copy)]
+struct LastRead {
+    listed: usize,
+    at: Instant,
 }
 
 /// The producer side of one port: rings the doorbells of the consumer ports of its service.
 ///
-/// The consumer ports are re-read from the service's dynamic config on every ring, so ports
-/// that appear (a restarted node) are rung from their first sample on and ports that went
-/// away (iceoryx2 removes dead nodes' ports) are not rung any more; a notifier per consumer
-/// node is opened when its first port appears and closed when its last one goes.
+/// The consumer ports are read from the service's dynamic config when their number changes,
+/// and at least every [`CONSUMERS_REFRESH`] while it does not: reading them copies the whole
+/// port list out of shared memory into two heap buffers, the largest cost of a ring had it
+/// been done on every send. So ports that appear (a restarted node) are rung from the next
+/// read on, ports that went away (iceoryx2 removes dead nodes' ports) are not rung after it,
+/// and a port whose doorbell could not be opened yet is tried again on the next ring; a
+/// notifier per consumer node is opened when its first port appears and closed when its last
+/// one goes.
 pub struct Ringer {
     node: Rc<Node<Doorbell>>,
     service: String,
-    /// The consumers rung last time, and the notifier of each one's node.
+    /// The consumers read last, and the notifier of each one's node.
     consumers: RefCell<Vec<(Consumer, Rc<Notifier<Doorbell>>)>>,
     /// Scratch list of the consumers now in the dynamic config.
     current: RefCell<Vec<Consumer>>,
+    /// `None` until the first read, and after a read that left a consumer out.
+    last_read: Cell<Option<LastRead>>,
 }
 
 impl Ringer {
@@ -212,40 +229,53 @@ impl Ringer {
             service: service.to_owned(),
             consumers: RefCell::new(Vec::new()),
             current: RefCell::new(Vec::new()),
+            last_read: Cell::new(None),
         }
     }
 
-    /// Rings the consumer ports that `list` visits (node id, port name, and whether to ring
-    /// it now; ports without a doorbell id are skipped), keeping a notifier for every port
-    /// visited. Returns how many were rung.
+    /// Rings the consumer ports of the service (all of them, or only the port with id `only`),
+    /// `listed` being how many consumer ports the service's dynamic config counts now (a
+    /// cheap read). When the ports are due to be read (see [`Ringer`]; also when `only` is
+    /// none of the ports read last), `list` visits them (node id, port name, port id; ports
+    /// without a doorbell id are skipped). Returns how many were rung.
     pub(crate) fn ring(
         &self,
-        list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, bool)),
+        listed: usize,
+        only: Option<u128>,
+        list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
     ) -> Result<usize, NodeError> {
-        let mut current = self.current.borrow_mut();
-        current.clear();
-        list(&mut |node, port, ring| {
-            if let Some(id) = event_id_of(port) {
-                current.push(Consumer { node, id, ring });
-            }
-        });
+        let now = Instant::now();
         let mut consumers = self.consumers.borrow_mut();
-        let same_port = |a: &Consumer, b: &Consumer| a.node == b.node && a.id == b.id;
-        if consumers.len() == current.len()
-            && consumers
-                .iter()
-                .zip(current.iter())
-                .all(|((c, _), n)| same_port(c, n))
-        {
-            for ((consumer, _), now) in consumers.iter_mut().zip(current.iter()) {
-                consumer.ring = now.ring;
+        let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
+        let due = unknown
+            || self.last_read.get().is_none_or(|last| {
+                last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
+            });
+        if due {
+            let mut current = self.current.borrow_mut();
+            current.clear();
+            list(&mut |node, port_name, port| {
+                if let Some(id) = event_id_of(port_name) {
+                    current.push(Consumer { node, id, port });
+                }
+            });
+            let unchanged = consumers.len() == current.len()
+                && consumers
+                    .iter()
+                    .zip(current.iter())
+                    .all(|((c, _), n)| c == n);
+            if !unchanged {
+                *consumers = self.connect(&consumers, &current);
             }
-        } else {
-            let connected = self.connect(&consumers, &current);
-            *consumers = connected;
+            let complete = consumers.len() == current.len();
+            self.last_read
+                .set(complete.then_some(LastRead { listed, at: now }));
         }
         let mut rung = 0;
-        for (consumer, notifier) in consumers.iter().filter(|(c, _)| c.ring) {
+        for (consumer, notifier) in consumers
+            .iter()
+            .filter(|(c, _)| only.is_none_or(|port| c.port == port))
+        {
             notifier
                 .notify_with_custom_event_id(consumer.id)
                 .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;

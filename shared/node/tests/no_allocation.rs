@@ -1,0 +1,117 @@
+//! The doorbell transport adds no heap allocation to a send (publish, then ring the
+//! subscriber's doorbell) beyond what iceoryx2's own `send_copy` makes, and none to a receive:
+//! a real-time loop's send does not wait on the allocator for our sake.
+
+// A counting global allocator is an `unsafe impl GlobalAlloc` around the system one.
+#![allow(unsafe_code)]
+
+use sabr_msgs::EncoderSample;
+use sabr_node::iceoryx2::prelude::{ipc, NodeBuilder, ServiceName};
+use sabr_node::{release_domain, Domain, Doorbell, NodeRuntime};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// The system allocator, counting allocations.
+struct Counting;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static COUNTING: Counting = Counting;
+
+/// Sends measured after the warm-up that connects the ports.
+const SENDS: u64 = 5_000;
+
+fn sample(seq: u64) -> EncoderSample {
+    EncoderSample {
+        seq,
+        t_ns: 0,
+        counts: [0; 5],
+    }
+}
+
+/// Allocations made by `f`.
+fn allocations(f: impl FnOnce()) -> u64 {
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    f();
+    ALLOCATIONS.load(Ordering::Relaxed) - before
+}
+
+/// (allocations in the sends, in the receives) of [`SENDS`] samples after a warm-up.
+fn count(mut send: impl FnMut(u64), mut receive: impl FnMut() -> u64) -> (u64, u64) {
+    for seq in 0..10 {
+        send(seq);
+        receive();
+    }
+    let (mut in_sends, mut in_receives, mut received) = (0, 0, 0);
+    for seq in 0..SENDS {
+        in_sends += allocations(|| send(seq));
+        in_receives += allocations(|| received += receive());
+    }
+    assert_eq!(received, SENDS);
+    (in_sends, in_receives)
+}
+
+#[test]
+fn the_doorbell_allocates_nothing_beyond_iceoryx2() {
+    let domain = Domain::new(&format!("d-noalloc-{}", std::process::id())).unwrap();
+    {
+        let node = NodeBuilder::new()
+            .config(&domain.iceoryx_config())
+            .create::<ipc::Service>()
+            .unwrap();
+        let service = node
+            .service_builder(&ServiceName::new("sabr/test/plain").unwrap())
+            .publish_subscribe::<EncoderSample>()
+            .open_or_create()
+            .unwrap();
+        let publisher = service.publisher_builder().create().unwrap();
+        let subscriber = service.subscriber_builder().create().unwrap();
+        let (plain_sends, _) = count(
+            |seq| {
+                publisher.send_copy(sample(seq)).unwrap();
+            },
+            || {
+                let mut received = 0;
+                while subscriber.receive().unwrap().is_some() {
+                    received += 1;
+                }
+                received
+            },
+        );
+
+        let producer = NodeRuntime::<Doorbell>::in_domain("producer", domain.clone()).unwrap();
+        let consumer = NodeRuntime::<Doorbell>::in_domain("consumer", domain.clone()).unwrap();
+        let publisher = producer
+            .publisher::<EncoderSample>("sabr/test/rung")
+            .unwrap();
+        let subscriber = consumer
+            .subscriber::<EncoderSample>("sabr/test/rung")
+            .unwrap();
+        let (sends, receives) = count(
+            |seq| publisher.send(sample(seq)).unwrap(),
+            || {
+                let mut received = 0;
+                subscriber.drain(|_| received += 1).unwrap();
+                received
+            },
+        );
+        assert_eq!(
+            sends, plain_sends,
+            "allocations in {SENDS} doorbell sends against iceoryx2's own send_copy"
+        );
+        assert_eq!(receives, 0, "allocations in {SENDS} doorbell receives");
+    }
+    release_domain(&domain);
+}
