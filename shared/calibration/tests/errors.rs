@@ -68,30 +68,13 @@ fn a_joint_that_did_not_move_makes_its_gear_ratio_unidentifiable() {
     );
 }
 
-#[test]
-fn a_tip_phase_without_tip_readings_leaves_the_needle_length_unidentified() {
-    let mut recording = short_recording();
-    for row in recording.tracker.iter_mut().filter(|r| r.tool == Tool::Tip) {
-        row.reading = ToolReading::Missing;
-    }
-    let error = error_of(&recording);
-    assert!(
-        matches!(
-            error,
-            CalibrationError::InsufficientData { phase: "tip", .. }
-        ),
-        "{error}"
-    );
-    assert!(error.to_string().contains("needle length"), "{error}");
-}
-
-#[test]
-fn missing_tip_readings_are_named_even_when_the_latency_cannot_be_estimated() {
+/// The refusal of a short session in which `tools` are never seen: it must name the tip phase.
+fn tip_phase_refusal(tools: &[Tool]) -> CalibrationError {
     let mut recording = short_recording();
     for row in recording
         .tracker
         .iter_mut()
-        .filter(|r| r.tool == Tool::Tip || r.tool == Tool::Back)
+        .filter(|r| tools.contains(&r.tool))
     {
         row.reading = ToolReading::Missing;
     }
@@ -103,6 +86,19 @@ fn missing_tip_readings_are_named_even_when_the_latency_cannot_be_estimated() {
         ),
         "{error}"
     );
+    error
+}
+
+#[test]
+fn a_tip_phase_without_tip_readings_leaves_the_needle_length_unidentified() {
+    let error = tip_phase_refusal(&[Tool::Tip]);
+    assert!(error.to_string().contains("needle length"), "{error}");
+}
+
+#[test]
+fn missing_tip_readings_are_named_even_when_the_latency_cannot_be_estimated() {
+    // Without the back marker the latency search has no frames to work with.
+    let error = tip_phase_refusal(&[Tool::Tip, Tool::Back]);
     assert!(
         error.to_string().contains("0 tip-sphere readings"),
         "{error}"
