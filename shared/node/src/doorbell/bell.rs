@@ -203,7 +203,8 @@ struct LastRead {
 /// The producer side of one port: rings the doorbells of the consumer ports of its service.
 ///
 /// The consumer ports are read from the service's dynamic config when their number changes,
-/// and at least every [`CONSUMERS_REFRESH`] while it does not: reading them copies the whole
+/// when a ring finds no one listening on a consumer's doorbell (its node ended; a replacement
+/// may be listed already), and at least every [`CONSUMERS_REFRESH`] otherwise: reading them copies the whole
 /// port list out of shared memory into two heap buffers, the largest cost of a ring had it
 /// been done on every send. So ports that appear (a restarted node) are rung from the next
 /// read on, ports that went away (iceoryx2 removes dead nodes' ports) are not rung after it,
@@ -244,44 +245,66 @@ impl Ringer {
         only: Option<u128>,
         list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
     ) -> Result<usize, NodeError> {
-        let now = Instant::now();
-        let mut consumers = self.consumers.borrow_mut();
-        let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
-        let due = unknown
-            || self.last_read.get().is_none_or(|last| {
-                last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
-            });
-        if due {
-            let mut current = self.current.borrow_mut();
-            current.clear();
-            list(&mut |node, port_name, port| {
-                if let Some(id) = event_id_of(port_name) {
-                    current.push(Consumer { node, id, port });
-                }
-            });
-            let unchanged = consumers.len() == current.len()
-                && consumers
-                    .iter()
-                    .zip(current.iter())
-                    .all(|((c, _), n)| c == n);
-            if !unchanged {
-                *consumers = self.connect(&consumers, &current);
+        let mut list = Some(list);
+        let mut reread = false;
+        loop {
+            let now = Instant::now();
+            let mut consumers = self.consumers.borrow_mut();
+            let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
+            let due = reread
+                || unknown
+                || self.last_read.get().is_none_or(|last| {
+                    last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
+                });
+            if let Some(list) = list.take_if(|_| due) {
+                self.read(&mut consumers, list);
+                let complete = consumers.len() == self.current.borrow().len();
+                self.last_read
+                    .set(complete.then_some(LastRead { listed, at: now }));
             }
-            let complete = consumers.len() == current.len();
-            self.last_read
-                .set(complete.then_some(LastRead { listed, at: now }));
+            let mut rung = 0;
+            for (consumer, notifier) in consumers
+                .iter()
+                .filter(|(c, _)| only.is_none_or(|port| c.port == port))
+            {
+                let heard = notifier
+                    .notify_with_custom_event_id(consumer.id)
+                    .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
+                if heard == 0 && list.is_some() {
+                    // No one listens on that doorbell any more: its node ended, and a
+                    // replacement may already be listed with the same number of ports.
+                    reread = true;
+                    break;
+                }
+                rung += 1;
+            }
+            if !reread || list.is_none() {
+                return Ok(rung);
+            }
         }
-        let mut rung = 0;
-        for (consumer, notifier) in consumers
-            .iter()
-            .filter(|(c, _)| only.is_none_or(|port| c.port == port))
-        {
-            notifier
-                .notify_with_custom_event_id(consumer.id)
-                .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
-            rung += 1;
+    }
+
+    /// Reads the consumer ports `list` visits into `consumers`, connecting to new ones.
+    fn read(
+        &self,
+        consumers: &mut Vec<(Consumer, Rc<Notifier<Doorbell>>)>,
+        list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
+    ) {
+        let mut current = self.current.borrow_mut();
+        current.clear();
+        list(&mut |node, port_name, port| {
+            if let Some(id) = event_id_of(port_name) {
+                current.push(Consumer { node, id, port });
+            }
+        });
+        let unchanged = consumers.len() == current.len()
+            && consumers
+                .iter()
+                .zip(current.iter())
+                .all(|((c, _), n)| c == n);
+        if !unchanged {
+            *consumers = self.connect(consumers, &current);
         }
-        Ok(rung)
     }
 
     /// Notifiers for `current`, reusing those of `previous` by node; a consumer whose
