@@ -204,9 +204,9 @@ struct LastRead {
 ///
 /// The consumer ports are read from the service's dynamic config when their number changes,
 /// when a ring finds no one listening on a consumer's doorbell (its node ended; a replacement
-/// may be listed already), and at least every [`CONSUMERS_REFRESH`] otherwise: reading them copies the whole
-/// port list out of shared memory into two heap buffers, the largest cost of a ring had it
-/// been done on every send. So ports that appear (a restarted node) are rung from the next
+/// may be listed already), and at least every [`CONSUMERS_REFRESH`] otherwise: reading them
+/// copies the whole port list out of shared memory into two heap buffers, the largest cost
+/// of a ring had it been done on every send. So ports that appear (a restarted node) are rung from the next
 /// read on, ports that went away (iceoryx2 removes dead nodes' ports) are not rung after it,
 /// and a port whose doorbell could not be opened yet is tried again on the next ring; a
 /// notifier per consumer node is opened when its first port appears and closed when its last
@@ -245,49 +245,54 @@ impl Ringer {
         only: Option<u128>,
         list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
     ) -> Result<usize, NodeError> {
-        let mut list = Some(list);
-        let mut reread = false;
-        loop {
-            let now = Instant::now();
-            let mut consumers = self.consumers.borrow_mut();
-            let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
-            let due = reread
-                || unknown
-                || self.last_read.get().is_none_or(|last| {
-                    last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
-                });
-            if let Some(list) = list.take_if(|_| due) {
-                self.read(&mut consumers, list);
-                let complete = consumers.len() == self.current.borrow().len();
-                self.last_read
-                    .set(complete.then_some(LastRead { listed, at: now }));
-            }
-            let mut rung = 0;
-            for (consumer, notifier) in consumers
-                .iter()
-                .filter(|(c, _)| only.is_none_or(|port| c.port == port))
-            {
-                let heard = notifier
-                    .notify_with_custom_event_id(consumer.id)
-                    .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
-                if heard == 0 && list.is_some() {
-                    // No one listens on that doorbell any more: its node ended, and a
-                    // replacement may already be listed with the same number of ports.
-                    reread = true;
-                    break;
-                }
-                rung += 1;
-            }
-            if !reread || list.is_none() {
+        let now = Instant::now();
+        let mut consumers = self.consumers.borrow_mut();
+        let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
+        let due = unknown
+            || self.last_read.get().is_none_or(|last| {
+                last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
+            });
+        if !due {
+            let (rung, unheard) = self.notify(&consumers, only)?;
+            if !unheard {
                 return Ok(rung);
             }
+            // No one listens on a doorbell any more: its node ended, and a replacement may
+            // already be listed with the same number of ports. Read them again.
         }
+        self.read(&mut consumers, listed, now, list);
+        Ok(self.notify(&consumers, only)?.0)
     }
 
-    /// Reads the consumer ports `list` visits into `consumers`, connecting to new ones.
+    /// Rings `consumers` (all of them, or only the port with id `only`); returns how many
+    /// and whether any doorbell rung had no listener.
+    fn notify(
+        &self,
+        consumers: &[(Consumer, Rc<Notifier<Doorbell>>)],
+        only: Option<u128>,
+    ) -> Result<(usize, bool), NodeError> {
+        let mut rung = 0;
+        let mut unheard = false;
+        for (consumer, notifier) in consumers
+            .iter()
+            .filter(|(c, _)| only.is_none_or(|port| c.port == port))
+        {
+            let listeners = notifier
+                .notify_with_custom_event_id(consumer.id)
+                .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
+            unheard |= listeners == 0;
+            rung += 1;
+        }
+        Ok((rung, unheard))
+    }
+
+    /// Reads the consumer ports `list` visits into `consumers`, connecting to new ones, and
+    /// notes the read (at `now`, with `listed` ports counted) unless a consumer was left out.
     fn read(
         &self,
         consumers: &mut Vec<(Consumer, Rc<Notifier<Doorbell>>)>,
+        listed: usize,
+        now: Instant,
         list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
     ) {
         let mut current = self.current.borrow_mut();
@@ -305,6 +310,9 @@ impl Ringer {
         if !unchanged {
             *consumers = self.connect(consumers, &current);
         }
+        let complete = consumers.len() == current.len();
+        self.last_read
+            .set(complete.then_some(LastRead { listed, at: now }));
     }
 
     /// Notifiers for `current`, reusing those of `previous` by node; a consumer whose
