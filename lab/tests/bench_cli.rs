@@ -59,6 +59,14 @@ fn quick_baselines_measure_every_transport_and_payload() {
             || stdout.contains("the ping-pong baselines ran without the wake-up latency bound"),
         "{stdout}"
     );
+    // It says how much CPU time the hypervisor took meanwhile (this machine has /proc/stat).
+    assert!(
+        stdout
+            .lines()
+            .any(|line| line.starts_with("the hypervisor took ")
+                && line.ends_with("% of the CPUs' time during the bench (steal)")),
+        "{stdout}"
+    );
     for payload in PAYLOADS {
         let judged = stdout.lines().any(|line| {
             line.trim_start()

@@ -29,6 +29,7 @@ use cpu::CpuShare;
 use payload::{Payload, Transport};
 use sabr_launcher::placement::Placement;
 use sabr_launcher::progress::Progress;
+use sabr_launcher::steal::CpuTimes;
 use sabr_launcher::wake_latency::WakeLatencyBound;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
@@ -179,6 +180,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     let out = sabr_launcher::create_out_dir(args.out.clone(), "bench")?;
     let machine = machine::describe();
     println!("sabr bench on {machine}; output in {}", out.display());
+    let cpu_at_start = CpuTimes::now();
     let mut results = Results::default();
     if settings.runs(Part::Baselines) {
         run_baselines(&settings, &mut results)?;
@@ -229,6 +231,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         "\nload average at the end: {} (1, 5, 15 min)",
         machine::load_average()
     );
+    println!("{}", steal_line(cpu_at_start, CpuTimes::now()));
     println!(
         "\nwrote {} .hgrm files (values in µs), {} and {} to {}",
         results.measurements.len(),
@@ -237,6 +240,21 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         out.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// How much CPU time the hypervisor took during the bench: on a busy host a vCPU waits
+/// for tens of ms now and then, which shows in every tail percentile.
+fn steal_line(start: anyhow::Result<CpuTimes>, end: anyhow::Result<CpuTimes>) -> String {
+    match start.and_then(|start| Ok((start, end?))) {
+        Ok((start, end)) => match end.steal_share_since(&start) {
+            Some(share) => format!(
+                "the hypervisor took {:.1} % of the CPUs' time during the bench (steal)",
+                share * 100.0
+            ),
+            None => "CPU steal during the bench: no clock tick elapsed".to_owned(),
+        },
+        Err(error) => format!("CPU steal during the bench: unknown ({error:#})"),
+    }
 }
 
 /// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards,

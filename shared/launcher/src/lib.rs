@@ -15,6 +15,7 @@ pub mod placement;
 pub mod progress;
 mod run_dir;
 pub mod spec;
+pub mod steal;
 mod supervisor;
 pub mod wake_latency;
 
@@ -28,6 +29,7 @@ use sabr_node::Domain;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
+use steal::CpuTimes;
 use supervisor::Supervisor;
 use wake_latency::WakeLatencyBound;
 
@@ -135,10 +137,21 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
             bound.latency_us
         );
     }
+    let cpu_at_start = CpuTimes::now().ok();
     let mut supervisor = Supervisor::new(&graph, &run, domain.clone(), duration)?;
     let reason = supervisor.run();
     supervisor.say(format_args!("stopping the graph: {reason}"));
     supervisor.stop_all();
+    let stolen = cpu_at_start.zip(CpuTimes::now().ok());
+    if let Some(share) = stolen.and_then(|(start, end)| end.steal_share_since(&start)) {
+        if share >= steal::NOTABLE_STEAL {
+            eprintln!(
+                "sabr launch: the hypervisor took {:.0} % of the CPUs' time while the graph ran \
+                 (steal): late wake-ups and skipped samples in the logs are the host's",
+                share * 100.0
+            );
+        }
+    }
     drop(wake_latency);
     let left = sabr_node::release_domain(&domain);
     if !left.is_empty() {
