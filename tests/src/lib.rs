@@ -33,6 +33,15 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// The median interval between consecutive time stamps (ns; the upper middle of an even
+/// count): a stream's period whether or not some instants were skipped.
+pub fn median_interval_ns(stamps: &[i64]) -> i64 {
+    let mut intervals: Vec<i64> = stamps.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(!intervals.is_empty(), "fewer than two time stamps");
+    intervals.sort_unstable();
+    intervals[intervals.len() / 2]
+}
+
 /// Serialises the multi-process tests of one test executable: each holds the guard for its
 /// whole run. Plain `cargo test` runs a test executable's tests on parallel threads (and test
 /// executables one after another); live graphs with 1 kHz deadlines on 2 cores must not share

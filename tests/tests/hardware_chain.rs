@@ -10,7 +10,7 @@
 
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
-use sabr_integration_tests::{process_alive, test_domain};
+use sabr_integration_tests::{median_interval_ns, process_alive, test_domain};
 use sabr_launcher::steal::{CpuTimes, NOTABLE_STEAL};
 use sabr_msgs::{
     services, EncoderSample, Lifecycle, LifecycleState, PhaseMark, RigTruth, Tool, TrackerFrame,
@@ -146,12 +146,6 @@ fn ready_at(lifecycle: &[Lifecycle], node: &str) -> Option<i64> {
 fn rate_hz(times: &[i64]) -> f64 {
     let span_s = (times[times.len() - 1] - times[0]) as f64 * 1e-9;
     (times.len() - 1) as f64 / span_s
-}
-
-/// The middle value of `values` (the upper one of an even count).
-fn median(mut values: Vec<i64>) -> i64 {
-    values.sort_unstable();
-    values[values.len() / 2]
 }
 
 /// The share of the CPUs' time the hypervisor took over `window`, from the snapshots taken
@@ -313,7 +307,7 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
         .collect();
     let encoder_rate = rate_hz(&times);
     let steal = steal_over(&cpu_times, &window);
-    let interval = median(times.windows(2).map(|w| w[1] - w[0]).collect());
+    let interval = median_interval_ns(&times);
     assert!(
         (900_000..=1_100_000).contains(&interval),
         "median encoder sample interval {interval} ns"
