@@ -309,7 +309,7 @@ fn rig_encoders_and_tracker_stream_at_their_rates_and_stop_cleanly() {
     let steal = steal_over(&cpu_times, &window);
     let interval = median_interval_ns(&times);
     assert!(
-        (900_000..=1_100_000).contains(&interval),
+        (ENCODER_PERIOD_NS * 9 / 10..=ENCODER_PERIOD_NS * 11 / 10).contains(&interval),
         "median encoder sample interval {interval} ns"
     );
     assert!(

@@ -262,9 +262,9 @@ fn sim_sensing_graph_matches_to_truth_records_and_stops_cleanly() {
         abs_quantile(&calibrated, 1.0) as f64 * 1e-6
     );
     let in_rate = |rate: f64, nominal: f64| (floor * nominal..1.02 * nominal).contains(&rate);
-    let stamps = |times: Vec<i64>| median_interval_ns(&times) as f64 * 1e-9;
-    let encoder_period = stamps(enc.iter().map(|s| s.t_ns).collect());
-    let counter_period = stamps(cnt.iter().map(|s| s.latch_t_ns).collect());
+    let median_period_s = |times: Vec<i64>| median_interval_ns(&times) as f64 * 1e-9;
+    let encoder_period = median_period_s(enc.iter().map(|s| s.t_ns).collect());
+    let counter_period = median_period_s(cnt.iter().map(|s| s.latch_t_ns).collect());
     assert!(
         in_rate(encoder_rate, 1000.0) && (0.9e-3..1.1e-3).contains(&encoder_period),
         "encoders at {encoder_rate} Hz, median interval {encoder_period} s, {:.1} % steal",
