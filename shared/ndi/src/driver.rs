@@ -355,12 +355,18 @@ impl NdiDriver {
     }
 
     /// Polls until the frame number differs from the last one returned (waiting
-    /// `poll_interval` between polls). A bad reply is returned as an error (and counted); the
+    /// `poll_interval` between polls, and after the arrival of the last frame returned before
+    /// the first one). A bad reply is returned as an error (and counted); the
     /// next call goes on polling. An unanswered poll is sent again up to
     /// [`DriverConfig::poll_retries`] times in a row (counted) before it is
     /// [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
     /// TSTART) is [`DriverError::Stalled`].
     pub fn next_frame(&mut self) -> Result<Stamped, DriverError> {
+        // The frame returned last arrived at `last_frame_at`; polling again sooner than a poll
+        // interval later would only find it again, and would keep the CPU and the port busy
+        // while the consumers of that frame wait to run.
+        let next_poll = self.last_frame_at + self.config.poll_interval;
+        std::thread::sleep(next_poll.saturating_duration_since(Instant::now()));
         let mut unanswered = 0;
         loop {
             let stamped = match self.poll() {

@@ -193,6 +193,36 @@ fn driver_tracks_the_simulated_device_on_a_pty() {
 }
 
 #[test]
+fn a_new_frame_is_not_polled_for_within_a_poll_interval_of_the_last() {
+    // A device with a new frame at every poll: only the driver's pacing spaces the frames.
+    let mut frame = 30;
+    let rig = serve(move || {
+        frame += 3;
+        Some(SimFrame {
+            frame,
+            readings: readings(frame),
+        })
+    });
+    let poll_interval = Duration::from_millis(5);
+    let mut driver = NdiDriver::connect(DriverConfig {
+        poll_interval,
+        ..config(&rig.path)
+    })
+    .unwrap();
+    let mut previous = driver.next_frame().unwrap().arrival;
+    for _ in 0..10 {
+        let stamped = driver.next_frame().unwrap();
+        let gap = stamped.arrival.duration_since(previous);
+        assert!(gap >= poll_interval, "frames {gap:?} apart");
+        previous = stamped.arrival;
+    }
+    // One poll per frame: none was spent finding the last frame again.
+    assert_eq!(driver.stats().polls, 11);
+    drop(driver);
+    rig.shut_down();
+}
+
+#[test]
 fn a_silent_tracker_is_a_timeout_not_a_hang() {
     // Nobody serves the terminal: INIT, the break and the RESET wait all time out.
     let pty = Pty::open().unwrap();

@@ -117,6 +117,36 @@ fn subscriber_port_names(rt: &Runtime, service: &str) -> Vec<String> {
 }
 
 #[test]
+fn a_process_has_fifteen_inbound_ports_and_a_dropped_one_frees_its_id() {
+    let domain = unique_domain("full");
+    {
+        let rt = Runtime::in_domain("consumer", domain.clone()).unwrap();
+        let service = |i: usize| format!("sabr/test/inbound-{i}");
+        let mut subscribers: Vec<_> = (0..15)
+            .map(|i| rt.subscriber::<EncoderSample>(&service(i)).unwrap())
+            .collect();
+        let error = rt
+            .subscriber::<EncoderSample>(&service(15))
+            .err()
+            .expect("a 16th inbound port got an event id");
+        assert!(
+            error
+                .to_string()
+                .contains("all 15 event ids of the doorbell are in use"),
+            "{error}"
+        );
+        // The freed id serves a new port, which its producer's ring wakes.
+        subscribers.swap_remove(3);
+        let late = rt.subscriber::<EncoderSample>(&service(15)).unwrap();
+        let publisher = rt.publisher::<EncoderSample>(&service(15)).unwrap();
+        publisher.send(sample(4)).unwrap();
+        let got = late.recv_timeout(Duration::from_secs(1)).unwrap();
+        assert_eq!(got.map(|s| s.seq), Some(4));
+    }
+    release(&domain);
+}
+
+#[test]
 fn several_producers_ring_one_doorbell_with_their_own_ids() {
     let domain = unique_domain("ids");
     {
