@@ -14,6 +14,11 @@ const TRANSPORTS: [&str; 6] = [
     "futex-cross",
 ];
 const PAYLOADS: [&str; 4] = ["encoder-sample", "tracker-frame", "ik", "motor-setpoint"];
+/// Transports also measured paced at the live graph's rate of each payload that has one.
+const PACED_TRANSPORTS: [&str; 3] = ["uds", "doorbell", "futex"];
+const PACED_PAYLOADS: [&str; 3] = ["encoder-sample", "tracker-frame", "ik"];
+/// Round trips of a paced row here: the floor, since a tenth of `SAMPLES` is fewer.
+const PACED_SAMPLES: u64 = 20;
 
 fn sabr_bench(args: &[&str]) -> (Output, u32) {
     let child = Command::new(env!("CARGO_BIN_EXE_sabr-lab"))
@@ -92,11 +97,22 @@ fn quick_baselines_measure_every_transport_and_payload() {
             expected_names.push(format!("{transport}/{payload}"));
         }
     }
+    let back_to_back = expected_names.len();
+    for transport in PACED_TRANSPORTS {
+        for payload in PACED_PAYLOADS {
+            expected_names.push(format!("{transport}-paced/{payload}"));
+        }
+    }
     let names: Vec<&str> = rows[1..].iter().map(|r| r[0].as_str()).collect();
     assert_eq!(names, expected_names);
-    for row in &rows[1..] {
+    for (index, row) in rows[1..].iter().enumerate() {
+        let count = if index < back_to_back {
+            SAMPLES
+        } else {
+            PACED_SAMPLES
+        };
         assert_eq!(row[1], "ns", "{row:?}");
-        assert_eq!(row[2], samples, "{row:?}");
+        assert_eq!(row[2], count.to_string(), "{row:?}");
         let values: Vec<u64> = row[3..].iter().map(|v| v.parse().unwrap()).collect();
         assert!(values[0] > 0, "a round trip of 0 ns: {row:?}");
         assert!(
@@ -106,13 +122,14 @@ fn quick_baselines_measure_every_transport_and_payload() {
         let hgrm = out.join(format!("{}.hgrm", row[0].replace('/', "_")));
         let text = std::fs::read_to_string(&hgrm).unwrap();
         assert!(
-            text.contains(&format!("Total count    = {:>12}]", SAMPLES)),
+            text.contains(&format!("Total count    = {count:>12}]")),
             "{text}"
         );
     }
 
+    // The pong's idle CPU use is measured on the back-to-back rows.
     let idle = csv_rows(&out.join("idle-cpu.csv"));
-    assert_eq!(idle.len(), 1 + expected_names.len());
+    assert_eq!(idle.len(), 1 + back_to_back);
     for row in &idle[1..] {
         let cores: f64 = row[2].parse().unwrap();
         assert!((0.0..=2.5).contains(&cores), "{row:?}");

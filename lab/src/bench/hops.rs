@@ -1,7 +1,7 @@
 //! The live-graph hops and the transport goals, judged against the ping-pong baselines
 //! measured in the same run.
 
-use super::payload::{baseline_name, Payload, Transport};
+use super::payload::{baseline_name, paced_name, Payload, Transport};
 use super::stats::{format_ns, Measurement, Summary};
 use std::fmt::Write as _;
 
@@ -151,6 +151,9 @@ pub struct RatioRow {
     pub p50_p99_ns: Result<(u64, u64), String>,
     /// Hop p50 / `futex` round-trip p50 of the same payload.
     pub p50_vs_futex: Option<f64>,
+    /// Hop p50 / `futex-paced` round-trip p50 of the same payload: against a floor as cold as
+    /// the hop (no goal; it shows how much of the first ratio the cold path explains).
+    pub p50_vs_paced_futex: Option<f64>,
     /// Hop p99 / `uds` round-trip p99 of the same payload.
     pub p99_vs_uds: Option<f64>,
     /// The goals and their outcomes (empty when not measured).
@@ -163,7 +166,11 @@ fn baseline(
     transport: Transport,
     payload: Payload,
 ) -> Result<Summary, String> {
-    let name = baseline_name(transport, payload);
+    summary_of(measured, baseline_name(transport, payload))
+}
+
+/// The summary of the measurement `name` in `measured`, or the name if absent or empty.
+fn summary_of(measured: &[Measurement], name: String) -> Result<Summary, String> {
     measured
         .iter()
         .find(|m| m.name == name)
@@ -182,6 +189,7 @@ pub fn ratio_rows(measured: &[Measurement], missing_reason: &str) -> Vec<RatioRo
                 hop: spec.name,
                 p50_p99_ns: Err(missing_reason.to_owned()),
                 p50_vs_futex: None,
+                p50_vs_paced_futex: None,
                 p99_vs_uds: None,
                 goals: Vec::new(),
             },
@@ -194,7 +202,7 @@ fn measured_row(spec: &HopSpec, hop: &Measurement, measured: &[Measurement]) -> 
     let summary = hop.summary();
     let (p50, p99) = (summary.p50, summary.p99);
     let mut goals = Vec::new();
-    let (mut p50_vs_futex, mut p99_vs_uds) = (None, None);
+    let (mut p50_vs_futex, mut p50_vs_paced_futex, mut p99_vs_uds) = (None, None, None);
     if let Baseline::PingPong(payload) = spec.baseline {
         let uds = baseline(measured, Transport::Uds, payload);
         p99_vs_uds = uds.as_ref().ok().map(|u| p99 as f64 / u.p99.max(1) as f64);
@@ -217,6 +225,9 @@ fn measured_row(spec: &HopSpec, hop: &Measurement, measured: &[Measurement]) -> 
                 None => Outcome::Unknown(format!("{} not measured", futex.unwrap_err())),
             },
         });
+        p50_vs_paced_futex = summary_of(measured, paced_name(Transport::Futex, payload))
+            .ok()
+            .map(|f| p50 as f64 / f.p50.max(1) as f64);
     }
     if let Some(limit) = spec.p99_limit_ns {
         goals.push(GoalCheck {
@@ -228,6 +239,7 @@ fn measured_row(spec: &HopSpec, hop: &Measurement, measured: &[Measurement]) -> 
         hop: spec.name,
         p50_p99_ns: Ok((p50, p99)),
         p50_vs_futex,
+        p50_vs_paced_futex,
         p99_vs_uds,
         goals,
     }
@@ -236,8 +248,8 @@ fn measured_row(spec: &HopSpec, hop: &Measurement, measured: &[Measurement]) -> 
 /// The printed table of [`ratio_rows`].
 pub fn ratio_table(rows: &[RatioRow]) -> String {
     let mut text = format!(
-        "{:<33} {:>12} {:>12} {:>9} {:>8}  goals\n",
-        "hop", "p50", "p99", "p50/futex", "p99/uds"
+        "{:<33} {:>12} {:>12} {:>9} {:>8} {:>9}  goals\n",
+        "hop", "p50", "p99", "p50/futex", "p99/uds", "p50/paced"
     );
     let ratio = |r: Option<f64>| r.map_or("-".to_owned(), |r| format!("{r:.2}"));
     for row in rows {
@@ -249,12 +261,13 @@ pub fn ratio_table(rows: &[RatioRow]) -> String {
                 let goals: Vec<String> = row.goals.iter().map(GoalCheck::describe).collect();
                 let _ = writeln!(
                     text,
-                    "{:<33} {:>12} {:>12} {:>9} {:>8}  {}",
+                    "{:<33} {:>12} {:>12} {:>9} {:>8} {:>9}  {}",
                     row.hop,
                     format_ns(*p50),
                     format_ns(*p99),
                     ratio(row.p50_vs_futex),
                     ratio(row.p99_vs_uds),
+                    ratio(row.p50_vs_paced_futex),
                     goals.join("; ")
                 );
             }
@@ -374,17 +387,23 @@ mod tests {
     fn table_shows_ratios_and_reasons() {
         let measured = [
             constant("futex/encoder-sample", 1000),
+            constant("futex-paced/encoder-sample", 750),
             constant("uds/encoder-sample", 3000),
             hop(0, 1500),
         ];
-        let table = ratio_table(&ratio_rows(&measured, "graph not running"));
+        let rows = ratio_rows(&measured, "graph not running");
+        assert_eq!(rows[0].p50_vs_paced_futex, Some(2.0));
+        assert_eq!(rows[1].p50_vs_paced_futex, None);
+        let table = ratio_table(&rows);
         let lines: Vec<&str> = table.lines().collect();
         assert!(
             lines[1].starts_with("hop/encoder-sample-to-subscriber"),
             "{table}"
         );
         assert!(
-            lines[1].contains(" 1.50 ") && lines[1].contains(" 0.50 "),
+            lines[1].contains(" 1.50 ")
+                && lines[1].contains(" 0.50 ")
+                && lines[1].contains(" 2.00 "),
             "{table}"
         );
         assert!(

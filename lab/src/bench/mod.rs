@@ -43,9 +43,9 @@ pub struct BenchArgs {
     /// Output directory (must be absent or empty) [default: runs/bench-<unix time>].
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
-    /// Round trips per ping-pong baseline; also sets the kinematics batches (N/100), the live
-    /// graph's IK requests (N/2) and motor setpoints (N/10) [default: 20000, with --quick
-    /// 1000].
+    /// Round trips per ping-pong baseline (a paced one: as many as fit 5 s, 1 s with --quick,
+    /// from 20 to N/10); also sets the kinematics batches (N/100), the live graph's IK requests
+    /// (N/2) and motor setpoints (N/10) [default: 20000, with --quick 1000].
     #[arg(long, value_name = "N")]
     samples: Option<u64>,
     /// A quick check, not figures to quote: fewer samples, short idle windows, a simulated
@@ -76,6 +76,8 @@ enum Part {
 struct Settings {
     parts: Vec<Part>,
     ping_pong: pingpong::Plan,
+    /// Longest a paced ping-pong runs (its round trips are then fewer than the others').
+    paced_window: Duration,
     kinematics_batches: u64,
     session_scale: f64,
     sensing: sensing::Plan,
@@ -85,7 +87,24 @@ struct Settings {
     progress: Progress,
 }
 
+/// The transports also measured paced at each hop's rate: the floor, the graph's transport
+/// and the Unix socket it is judged against.
+const PACED_TRANSPORTS: [Transport; 3] = [Transport::Uds, Transport::Doorbell, Transport::Futex];
+
 impl Settings {
+    /// The ping-pong plan paced at `pause`: as many round trips as fit the paced window (at
+    /// least 20, at most a tenth of the back-to-back ones), the pong's idle CPU glanced at
+    /// only (the back-to-back rows measure it).
+    fn paced_plan(&self, pause: Duration) -> pingpong::Plan {
+        let fit = (self.paced_window.as_nanos() / pause.as_nanos().max(1)) as u64;
+        pingpong::Plan {
+            warmup: 10,
+            samples: fit.clamp(20, (self.ping_pong.samples / 10).max(20)),
+            idle_window: Duration::from_millis(50),
+            pause,
+        }
+    }
+
     fn new(args: &BenchArgs) -> anyhow::Result<Self> {
         let samples = args
             .samples
@@ -107,7 +126,9 @@ impl Settings {
                 warmup: (samples / 10).max(10),
                 samples,
                 idle_window: Duration::from_millis(if args.quick { 300 } else { 2_000 }),
+                pause: Duration::ZERO,
             },
+            paced_window: Duration::from_secs(if args.quick { 1 } else { 5 }),
             kinematics_batches: (samples / compute::SOLVES_PER_BATCH).max(10),
             session_scale: if args.quick { 0.1 } else { 1.0 },
             sensing: sensing::Plan {
@@ -220,7 +241,8 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     if settings.runs(Part::Hops) {
         println!(
             "\nlive-graph hops (p50 as a ratio to the same payload's futex round-trip p50, p99 \
-             to its Unix-socket round-trip p99):"
+             to its Unix-socket round-trip p99, p50 to the futex round trip paced at the hop's \
+             rate):"
         );
         print!("{}", hops::ratio_table(&hop_rows));
     }
@@ -303,6 +325,20 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
                 vec![ping_pong.round_trips]
             });
             results.add(&name, measured);
+        }
+    }
+    for transport in PACED_TRANSPORTS {
+        for payload in Payload::ALL {
+            let Some(pause) = payload.live_period() else {
+                continue;
+            };
+            let name = payload::paced_name(transport, payload);
+            settings.measuring(&name);
+            let plan = settings.paced_plan(pause);
+            let measured = pinning(transport, payload, &settings.bin_dir).and_then(|pinning| {
+                pingpong::run(transport, payload, &plan, &pinning, &domain, &socket_dir)
+            });
+            results.add(&name, measured.map(|ping_pong| vec![ping_pong.round_trips]));
         }
     }
     let left = sabr_node::release_domain(&domain);

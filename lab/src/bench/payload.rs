@@ -1,8 +1,16 @@
 //! What the ping-pong baselines carry (the graph's own messages) and over what.
 
+use sabr_model::RobotParams;
 use sabr_node::msgs::{
     EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
 };
+use std::time::Duration;
+
+/// Time between two encoder samples of the live graph (`sabr-encoders` at its default 1 kHz).
+pub const ENCODER_PERIOD: Duration = Duration::from_millis(1);
+
+/// Time between two IK requests of the live graph: the motion node's setpoint rate.
+pub const IK_PERIOD: Duration = Duration::from_millis(1);
 
 /// The request → response message pair of a ping-pong, one per live-graph hop, so each hop is
 /// compared with a baseline carrying the same bytes.
@@ -26,6 +34,20 @@ impl Payload {
         Payload::Ik,
         Payload::MotorSetpoint,
     ];
+
+    /// How often the live graph sends the request of this payload, for the hops compared
+    /// with a ping-pong (the encoders' samples, the simulated tracker's frames, IK requests);
+    /// `None` for the setpoints, whose hop is judged against the rig's tick.
+    pub fn live_period(self) -> Option<Duration> {
+        match self {
+            Payload::EncoderSample => Some(ENCODER_PERIOD),
+            Payload::TrackerFrame => Some(Duration::from_secs_f64(
+                1.0 / RobotParams::nominal().tracker_rate_hz,
+            )),
+            Payload::Ik => Some(IK_PERIOD),
+            Payload::MotorSetpoint => None,
+        }
+    }
 
     /// Name used in measurement names and on the command line.
     pub fn name(self) -> &'static str {
@@ -129,6 +151,12 @@ pub fn baseline_name(transport: Transport, payload: Payload) -> String {
     format!("{}/{}", transport.name(), payload.name())
 }
 
+/// Name of the round-trip measurement of `payload` over `transport` paced at the payload's
+/// [`Payload::live_period`]: `<transport>-paced/<payload>`.
+pub fn paced_name(transport: Transport, payload: Payload) -> String {
+    format!("{}-paced/{}", transport.name(), payload.name())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,6 +172,18 @@ mod tests {
             let value = transport.to_possible_value().unwrap();
             assert_eq!(value.get_name(), transport.name());
         }
+    }
+
+    #[test]
+    fn the_hops_with_a_ping_pong_have_a_live_period() {
+        assert_eq!(Payload::EncoderSample.live_period(), Some(ENCODER_PERIOD));
+        assert_eq!(
+            Payload::TrackerFrame.live_period(),
+            Some(Duration::from_millis(50)),
+            "the simulated tracker runs at 20 Hz"
+        );
+        assert_eq!(Payload::MotorSetpoint.live_period(), None);
+        assert_eq!(paced_name(Transport::Futex, Payload::Ik), "futex-paced/ik");
     }
 
     #[test]

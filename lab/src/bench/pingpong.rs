@@ -6,7 +6,7 @@ use super::doorbell::DoorbellEnd;
 use super::futex::FutexEnd;
 use super::graph::placed;
 use super::iox::{IoxEnd, Wait};
-use super::payload::{baseline_name, Payload, Transport};
+use super::payload::{baseline_name, paced_name, Payload, Transport};
 use super::stats::Measurement;
 use super::uds::{SocketFile, UdsEnd};
 use anyhow::{bail, Context};
@@ -39,6 +39,10 @@ pub struct Plan {
     pub samples: u64,
     /// Window over which the pong's CPU use is measured while it waits for a message.
     pub idle_window: Duration,
+    /// Pause after each recorded round trip: zero back to back (caches and wake-up paths
+    /// hot), else the period at which the live graph sends the payload, so the round trip
+    /// runs as cold as the hop it stands for. A paced row is named by [`paced_name`].
+    pub pause: Duration,
 }
 
 impl Plan {
@@ -247,7 +251,11 @@ fn measure(
     peer: PongProcess,
     mut round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
 ) -> anyhow::Result<PingPong> {
-    let name = baseline_name(transport, payload);
+    let name = if plan.pause.is_zero() {
+        baseline_name(transport, payload)
+    } else {
+        paced_name(transport, payload)
+    };
     for _ in 0..plan.warmup {
         round_trip(Instant::now() + ROUND_TRIP_TIMEOUT)
             .with_context(|| format!("{name}: warm-up"))?;
@@ -258,6 +266,7 @@ fn measure(
         round_trip(start + ROUND_TRIP_TIMEOUT)
             .with_context(|| format!("{name}: round trip {index}"))?;
         round_trips.record_duration(start.elapsed())?;
+        std::thread::sleep(plan.pause);
     }
     let pong_idle = measure_cpu_share(peer.pid(), plan.idle_window)
         .with_context(|| format!("{name}: idle CPU of the pong process"))?;

@@ -28,6 +28,7 @@ use super::hops::{
     Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
     TRACKER_FRAME_TO_MATCHED,
 };
+use super::payload::IK_PERIOD;
 use super::stats::{format_ns, Measurement};
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
@@ -47,9 +48,6 @@ const NODES: [&str; 6] = ["rig", "encoders", "tracker", "sync", "recorder", "ik"
 /// Longest wait for the sync's first matched sample once every node is ready (its frame
 /// clock must lock first).
 const LOCK_TIMEOUT: Duration = Duration::from_secs(30);
-
-/// Time between two IK requests: the motion node's setpoint rate.
-const IK_PERIOD: Duration = Duration::from_millis(1);
 
 /// Longest wait for one IK response.
 const IK_TIMEOUT: Duration = Duration::from_millis(200);
