@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 
 /// Highest event id of a doorbell: at most 15 inbound ports per process (id 0 is unused; the
 /// busiest service, the calibrator, has 7). Every wake-up drains iceoryx2's counting bit set
-/// with one atomic swap per id up to this one, in shared memory the producers write: 64 ids
-/// cost about 0.9 µs a wake-up on a 2-vCPU guest, 16 ids a fraction of that.
+/// with one atomic swap per id up to this one, in shared memory the producers write: on a
+/// 2-vCPU guest a doorbell round trip took 5.4 µs (p50) with 64 ids, 4.9 µs with 16.
 const EVENT_ID_MAX: usize = 15;
 // The ids that rang and the free ones are bit masks of one `u64`.
 const _: () = assert!(EVENT_ID_MAX < 64);
@@ -79,7 +79,7 @@ impl Bell {
             _service: service,
             pending: Cell::new(0),
             // Ids 1 to EVENT_ID_MAX.
-            free: Cell::new(((1u64 << (EVENT_ID_MAX + 1)) - 1) & !1),
+            free: Cell::new((u64::MAX >> (63 - EVENT_ID_MAX)) & !1),
             name,
         }))
     }
