@@ -14,6 +14,7 @@ use sabr_integration_tests::{median_interval_ns, process_alive, test_domain};
 use sabr_launcher::steal::{CpuTimes, NOTABLE_STEAL};
 use sabr_msgs::{
     services, EncoderSample, Lifecycle, LifecycleState, PhaseMark, RigTruth, Tool, TrackerFrame,
+    ENCODER_RATE_HZ,
 };
 use sabr_node::{monotonic_ns, Domain, GraphObserver, NodeRuntime, Subscriber};
 use std::collections::HashMap;
@@ -23,8 +24,8 @@ use std::time::{Duration, Instant};
 
 /// Length of the window over which rates are measured, after the homing phase, ns.
 const RATE_WINDOW_NS: i64 = 5_000_000_000;
-/// The encoder sampler's period (its default 1 kHz), ns.
-const ENCODER_PERIOD_NS: i64 = 1_000_000;
+/// The encoder sampler's period at its default rate, ns.
+const ENCODER_PERIOD_NS: i64 = (1e9 / ENCODER_RATE_HZ) as i64;
 /// Upper bound for the whole test's collection.
 const TIMEOUT: Duration = Duration::from_secs(60);
 

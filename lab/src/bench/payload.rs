@@ -3,11 +3,9 @@
 use sabr_model::RobotParams;
 use sabr_node::msgs::{
     EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
+    ENCODER_RATE_HZ,
 };
 use std::time::Duration;
-
-/// Time between two encoder samples of the live graph (`sabr-encoders` at its default 1 kHz).
-pub const ENCODER_PERIOD: Duration = Duration::from_millis(1);
 
 /// Time between two IK requests of the live graph: the motion node's setpoint rate.
 pub const IK_PERIOD: Duration = Duration::from_millis(1);
@@ -40,7 +38,7 @@ impl Payload {
     /// `None` for the setpoints, whose hop is judged against the rig's tick.
     pub fn live_period(self) -> Option<Duration> {
         match self {
-            Payload::EncoderSample => Some(ENCODER_PERIOD),
+            Payload::EncoderSample => Some(Duration::from_secs_f64(1.0 / ENCODER_RATE_HZ)),
             Payload::TrackerFrame => Some(Duration::from_secs_f64(
                 1.0 / RobotParams::nominal().tracker_rate_hz,
             )),
@@ -176,7 +174,10 @@ mod tests {
 
     #[test]
     fn the_hops_with_a_ping_pong_have_a_live_period() {
-        assert_eq!(Payload::EncoderSample.live_period(), Some(ENCODER_PERIOD));
+        assert_eq!(
+            Payload::EncoderSample.live_period(),
+            Some(Duration::from_millis(1))
+        );
         assert_eq!(
             Payload::TrackerFrame.live_period(),
             Some(Duration::from_millis(50)),

@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::bail;
-use sabr_msgs::{services, CounterLatch, EncoderSample};
+use sabr_msgs::{services, CounterLatch, EncoderSample, ENCODER_RATE_HZ};
 use sabr_node::{monotonic_ns, Deadline, Exit, NodeRuntime, StatusTimer};
 
 use sampler::{Reading, Sampler};
@@ -26,7 +26,7 @@ const WAIT_SLICE: Duration = Duration::from_millis(100);
 #[command(name = "sabr-encoders", about)]
 struct Args {
     /// Sampling rate, Hz.
-    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    #[arg(long, value_name = "HZ", default_value_t = ENCODER_RATE_HZ)]
     rate_hz: f64,
     /// A register latch older than this is stale and not published, ms.
     #[arg(long, value_name = "MS", default_value_t = 10.0)]

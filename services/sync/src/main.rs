@@ -5,7 +5,9 @@
 //! documentation for the method.
 
 use anyhow::{bail, Context};
-use sabr_msgs::{services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame};
+use sabr_msgs::{
+    services, EncoderSample, MatchedSample, ParameterSetAnnouncement, TrackerFrame, ENCODER_RATE_HZ,
+};
 use sabr_node::{monotonic_ns, Exit, NodeRuntime, StallWatch, StatusTimer, STATUS_PERIOD};
 use sabr_sync::clock::{ClockConfig, ClockEstimate};
 use sabr_sync::encoder_buffer::Pushed;
@@ -48,8 +50,6 @@ struct Args {
     stall_ms: f64,
 }
 
-/// Encoder samples per second assumed when sizing the buffer.
-const ENCODER_RATE_HZ: f64 = 1000.0;
 /// Index of the encoder stream in [`Watch::streams`].
 const ENCODER_STREAM: usize = 0;
 /// Index of the tracker stream in [`Watch::streams`].

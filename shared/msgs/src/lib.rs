@@ -25,7 +25,7 @@ pub use motion::{
 };
 pub use sensing::{
     CounterLatch, EncoderSample, LatencySource, MatchQuality, MatchedSample, RigTruth, Tool,
-    ToolSample, ToolStatus, TrackerFrame, JOINTS, TOOLS,
+    ToolSample, ToolStatus, TrackerFrame, ENCODER_RATE_HZ, JOINTS, TOOLS,
 };
 
 /// Re-export of the derive and trait every message implements, for services that define

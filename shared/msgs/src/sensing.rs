@@ -6,8 +6,12 @@ use iceoryx2::prelude::ZeroCopySend;
 pub const JOINTS: usize = 5;
 /// Number of tools in a tracker frame, indexed by [`Tool`].
 pub const TOOLS: usize = 4;
+/// The graph's encoder sampling rate, Hz: `encoders` publishes an [`EncoderSample`] this
+/// often unless told otherwise, and its consumers size their buffers and expectations by it.
+pub const ENCODER_RATE_HZ: f64 = 1000.0;
 
-/// One reading of the five incremental encoder counters (published by `encoders`, ~1 kHz).
+/// One reading of the five incremental encoder counters (published by `encoders` at
+/// [`ENCODER_RATE_HZ`]).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[type_name("sabr.EncoderSample.v1")]
