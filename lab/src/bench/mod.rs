@@ -33,6 +33,7 @@ use sabr_launcher::steal::CpuTimes;
 use sabr_launcher::wake_latency::WakeLatencyBound;
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
@@ -87,20 +88,35 @@ struct Settings {
     progress: Progress,
 }
 
-/// The transports also measured paced at each hop's rate: the floor, the graph's transport
-/// and the Unix socket it is judged against.
+/// The transports whose back-to-back ping-pongs of one payload run together, taking turns
+/// slice by slice (see [`pingpong::run`]): those placed as the shipped graph places the hop
+/// and sleeping while they wait (a busy-polling pong would take the CPU from the others;
+/// `futex-cross` is placed differently).
+const TOGETHER: [Transport; 4] = [
+    Transport::IoxEvent,
+    Transport::Uds,
+    Transport::Doorbell,
+    Transport::Futex,
+];
+
+/// Slices each ping-pong's recorded round trips are split into (see [`pingpong::Plan`]).
+const ROUNDS: u64 = 10;
+
+/// The transports also measured paced at each hop's rate, together: the floor, the graph's
+/// transport and the Unix socket it is judged against.
 const PACED_TRANSPORTS: [Transport; 3] = [Transport::Uds, Transport::Doorbell, Transport::Futex];
 
 impl Settings {
     /// The ping-pong plan paced at `pause`: as many round trips as fit the paced window (at
-    /// least 20, at most a tenth of the back-to-back ones), the pong's idle CPU glanced at
-    /// only (the back-to-back rows measure it).
+    /// least 20, at most a tenth of the back-to-back ones); the pong's idle CPU is not
+    /// measured (the back-to-back rows measure it).
     fn paced_plan(&self, pause: Duration) -> pingpong::Plan {
         let fit = (self.paced_window.as_nanos() / pause.as_nanos().max(1)) as u64;
         pingpong::Plan {
             warmup: 10,
             samples: fit.clamp(20, (self.ping_pong.samples / 10).max(20)),
-            idle_window: Duration::from_millis(50),
+            rounds: ROUNDS,
+            idle_window: None,
             pause,
         }
     }
@@ -125,7 +141,8 @@ impl Settings {
             ping_pong: pingpong::Plan {
                 warmup: (samples / 10).max(10),
                 samples,
-                idle_window: Duration::from_millis(if args.quick { 300 } else { 2_000 }),
+                rounds: ROUNDS,
+                idle_window: Some(Duration::from_millis(if args.quick { 300 } else { 2_000 })),
                 pause: Duration::ZERO,
             },
             paced_window: Duration::from_secs(if args.quick { 1 } else { 5 }),
@@ -280,7 +297,8 @@ fn steal_line(start: anyhow::Result<CpuTimes>, end: anyhow::Result<CpuTimes>) ->
 }
 
 /// Every transport × payload ping-pong in an iceoryx2 domain of its own, released afterwards,
-/// each placed as [`pinning`] says.
+/// each placed as [`pinning`] says; per payload, the [`TOGETHER`] ones run together and so do
+/// the [`PACED_TRANSPORTS`] ones, taking turns in [`ROUNDS`] slices.
 fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<()> {
     let domain = Domain::new(&format!("sabr-bench-{}", std::process::id()))?;
     // The round trips run under the CPU wake-up latency bound the shipped graphs hold while
@@ -306,40 +324,57 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         None => None,
     };
     let socket_dir = std::env::temp_dir();
-    for transport in Transport::ALL {
-        for payload in Payload::ALL {
-            let name = payload::baseline_name(transport, payload);
-            settings.measuring(&name);
-            let measured = pinning(transport, payload, &settings.bin_dir).and_then(|pinning| {
-                pingpong::run(
-                    transport,
-                    payload,
-                    &settings.ping_pong,
-                    &pinning,
-                    &domain,
-                    &socket_dir,
-                )
-            });
-            let measured = measured.map(|ping_pong| {
-                results.idle.push((name.clone(), ping_pong.pong_idle));
-                vec![ping_pong.round_trips]
-            });
-            results.add(&name, measured);
+    let mut measured = BTreeMap::new();
+    let mut run_group = |transports: &[Transport], payload: Payload, plan: &pingpong::Plan| {
+        let rows: Vec<(Transport, Payload)> = transports.iter().map(|&t| (t, payload)).collect();
+        let name = |transport: Transport| {
+            if plan.pause.is_zero() {
+                payload::baseline_name(transport, payload)
+            } else {
+                payload::paced_name(transport, payload)
+            }
+        };
+        let names: Vec<String> = transports.iter().map(|&t| name(t)).collect();
+        settings.measuring(names.join(", "));
+        let results = match pinning(transports[0], payload, &settings.bin_dir) {
+            Ok(pinning) => pingpong::run(&rows, plan, &pinning, &domain, &socket_dir),
+            Err(error) => rows
+                .iter()
+                .map(|_| Err(anyhow::anyhow!("{error:#}")))
+                .collect(),
+        };
+        measured.extend(names.into_iter().zip(results));
+    };
+    for payload in Payload::ALL {
+        run_group(&[Transport::IoxPoll], payload, &settings.ping_pong);
+        run_group(&TOGETHER, payload, &settings.ping_pong);
+        run_group(&[Transport::FutexCross], payload, &settings.ping_pong);
+        if let Some(pause) = payload.live_period() {
+            run_group(&PACED_TRANSPORTS, payload, &settings.paced_plan(pause));
         }
     }
-    for transport in PACED_TRANSPORTS {
-        for payload in Payload::ALL {
-            let Some(pause) = payload.live_period() else {
-                continue;
-            };
-            let name = payload::paced_name(transport, payload);
-            settings.measuring(&name);
-            let plan = settings.paced_plan(pause);
-            let measured = pinning(transport, payload, &settings.bin_dir).and_then(|pinning| {
-                pingpong::run(transport, payload, &plan, &pinning, &domain, &socket_dir)
-            });
-            results.add(&name, measured.map(|ping_pong| vec![ping_pong.round_trips]));
-        }
+    let paced = PACED_TRANSPORTS.iter().flat_map(|&transport| {
+        Payload::ALL
+            .into_iter()
+            .filter(|payload| payload.live_period().is_some())
+            .map(move |payload| payload::paced_name(transport, payload))
+    });
+    let back_to_back = Transport::ALL.iter().flat_map(|&transport| {
+        Payload::ALL
+            .into_iter()
+            .map(move |payload| payload::baseline_name(transport, payload))
+    });
+    for name in back_to_back.chain(paced) {
+        let Some(ping_pong) = measured.remove(&name) else {
+            continue;
+        };
+        let ping_pong = ping_pong.map(|ping_pong| {
+            results
+                .idle
+                .extend(ping_pong.pong_idle.map(|idle| (name.clone(), idle)));
+            vec![ping_pong.round_trips]
+        });
+        results.add(&name, ping_pong);
     }
     let left = sabr_node::release_domain(&domain);
     if !left.is_empty() {

@@ -1,5 +1,6 @@
 //! The measuring side of a ping-pong baseline: spawns `sabr-pong` (beside this executable) as
-//! a separate process, times round trips, then watches the waiting pong's CPU use.
+//! a separate process, times round trips (several ping-pongs taking turns), then watches the
+//! waiting pong's CPU use.
 
 use super::cpu::{measure_cpu_share, CpuShare};
 use super::doorbell::DoorbellEnd;
@@ -30,25 +31,44 @@ const ROUND_TRIP_TIMEOUT: Duration = Duration::from_secs(5);
 /// Longest wait for the pong process to start up (and to exit at the end).
 const STARTUP_TIMEOUT: Duration = Duration::from_secs(20);
 
-/// How many round trips one ping-pong runs, and how long the idle pong is watched.
+/// How many round trips one ping-pong runs, in how many rounds, and how long the idle pong
+/// is watched.
 #[derive(Debug, Clone, Copy)]
 pub struct Plan {
     /// Round trips run first and not recorded (caches, page faults, connection set-up).
     pub warmup: u64,
     /// Round trips recorded.
     pub samples: u64,
-    /// Window over which the pong's CPU use is measured while it waits for a message.
-    pub idle_window: Duration,
-    /// Pause after each recorded round trip: zero back to back (caches and wake-up paths
-    /// hot), else the period at which the live graph sends the payload, so the round trip
-    /// runs as cold as the hop it stands for. A paced row is named by [`paced_name`].
+    /// Slices the recorded round trips are split into. Ping-pongs run together take turns
+    /// slice by slice (see [`run`]), so a change of the machine's speed during the run falls
+    /// on all of them alike; each slice starts with a tenth of the warm-up's round trips per
+    /// round, unrecorded (the other ping-pongs' slices ran in between).
+    pub rounds: u64,
+    /// Window over which the pong's CPU use is measured while it waits for a message;
+    /// `None`: not measured.
+    pub idle_window: Option<Duration>,
+    /// Pause after each round trip: zero back to back (caches and wake-up paths hot), else
+    /// the period at which the live graph sends the payload, so the round trip runs as cold
+    /// as the hop it stands for. A paced row is named by [`paced_name`].
     pub pause: Duration,
 }
 
 impl Plan {
-    /// Messages the pong answers: warm-up, samples and the final one that releases it.
+    /// Unrecorded round trips at the start of each slice.
+    fn slice_warmup(&self) -> u64 {
+        self.warmup / self.rounds.max(1)
+    }
+
+    /// Recorded round trips of slice `round` (the samples spread as evenly as they go).
+    fn slice_samples(&self, round: u64) -> u64 {
+        let rounds = self.rounds.max(1);
+        self.samples / rounds + u64::from(round < self.samples % rounds)
+    }
+
+    /// Messages the pong answers: warm-up, each slice's warm-up and samples, and the final
+    /// one that releases it.
     pub fn pong_count(&self) -> u64 {
-        self.warmup + self.samples + 1
+        self.warmup + self.rounds.max(1) * self.slice_warmup() + self.samples + 1
     }
 }
 
@@ -56,8 +76,9 @@ impl Plan {
 pub struct PingPong {
     /// Round-trip times (ns), named `<transport>/<payload>`.
     pub round_trips: Measurement,
-    /// CPU use of the pong process while it waited for a message that did not come.
-    pub pong_idle: CpuShare,
+    /// CPU use of the pong process while it waited for a message that did not come (if the
+    /// plan has an idle window).
+    pub pong_idle: Option<CpuShare>,
 }
 
 /// The two iceoryx2 service names of a ping-pong: (ping, pong).
@@ -76,52 +97,96 @@ pub struct Pinning {
     pub pong: Placement,
 }
 
-/// Runs one ping-pong of `payload` over `transport` against a freshly spawned pong process,
-/// the two placed as `pinning` says (the measuring side on a thread of its own).
-/// iceoryx2 services live in `domain`; the Unix socket is created in `socket_dir`.
+/// Runs the ping-pongs of `rows` (transport, payload) together, each against a freshly
+/// spawned pong process, all placed as `pinning` says (the measuring side on a thread of its
+/// own): every pong is started and warmed up, then the rows take turns for `plan.rounds`
+/// slices (the order rotating each round), then each pong's idle CPU is measured and the
+/// pong released. Returns one result per row, in the order of `rows`; a row that fails
+/// leaves the others running. iceoryx2 services live in `domain`; Unix sockets are created
+/// in `socket_dir`.
 pub fn run(
-    transport: Transport,
-    payload: Payload,
+    rows: &[(Transport, Payload)],
     plan: &Plan,
     pinning: &Pinning,
     domain: &Domain,
     socket_dir: &Path,
-) -> anyhow::Result<PingPong> {
-    placed(&pinning.ping, || {
-        run_here(transport, payload, plan, &pinning.pong, domain, socket_dir)
-    })
+) -> Vec<anyhow::Result<PingPong>> {
+    let placed_run = placed(&pinning.ping, || {
+        Ok(run_here(rows, plan, &pinning.pong, domain, socket_dir))
+    });
+    match placed_run {
+        Ok(results) => results,
+        Err(error) => rows
+            .iter()
+            .map(|_| Err(anyhow::anyhow!("{error:#}")))
+            .collect(),
+    }
 }
 
 /// [`run`] on the calling thread.
 fn run_here(
-    transport: Transport,
-    payload: Payload,
+    rows: &[(Transport, Payload)],
     plan: &Plan,
     pong: &Placement,
     domain: &Domain,
     socket_dir: &Path,
-) -> anyhow::Result<PingPong> {
-    let peer = Peer {
-        transport,
-        payload,
-        plan,
-        placement: pong,
-    };
-    match transport {
-        Transport::IoxPoll | Transport::IoxEvent => match payload {
-            Payload::EncoderSample => run_iox::<EncoderSample, EncoderSample>(&peer, domain),
-            Payload::TrackerFrame => run_iox::<TrackerFrame, MatchedSample>(&peer, domain),
-            Payload::Ik => run_iox::<IkRequest, IkResponse>(&peer, domain),
-            Payload::MotorSetpoint => run_iox::<MotorSetpoint, MotorSetpoint>(&peer, domain),
+) -> Vec<anyhow::Result<PingPong>> {
+    let mut sessions: Vec<anyhow::Result<Session>> = rows
+        .iter()
+        .map(|&(transport, payload)| {
+            let peer = Peer {
+                transport,
+                payload,
+                plan,
+                placement: pong,
+            };
+            let mut session = start(&peer, domain, socket_dir)?;
+            session.run(plan.warmup, false)?;
+            Ok(session)
+        })
+        .collect();
+    for (round, index) in turns(plan.rounds, sessions.len()) {
+        let slot = &mut sessions[index];
+        if let Ok(session) = slot {
+            let slice = session
+                .run(plan.slice_warmup(), false)
+                .and_then(|()| session.run(plan.slice_samples(round), true));
+            if let Err(error) = slice {
+                *slot = Err(error);
+            }
+        }
+    }
+    sessions
+        .into_iter()
+        .map(|session| session.and_then(Session::finish))
+        .collect()
+}
+
+/// The order in which `sessions` ping-pongs take their slices over `rounds` rounds:
+/// (round, session index), every session once per round, the first one rotating.
+fn turns(rounds: u64, sessions: usize) -> impl Iterator<Item = (u64, usize)> {
+    (0..rounds.max(1)).flat_map(move |round| {
+        (0..sessions).map(move |turn| (round, (turn + round as usize) % sessions))
+    })
+}
+
+/// Starts the pong of `peer` and opens the measuring side.
+fn start<'a>(peer: &Peer<'a>, domain: &Domain, socket_dir: &Path) -> anyhow::Result<Session<'a>> {
+    match peer.transport {
+        Transport::IoxPoll | Transport::IoxEvent => match peer.payload {
+            Payload::EncoderSample => start_iox::<EncoderSample, EncoderSample>(peer, domain),
+            Payload::TrackerFrame => start_iox::<TrackerFrame, MatchedSample>(peer, domain),
+            Payload::Ik => start_iox::<IkRequest, IkResponse>(peer, domain),
+            Payload::MotorSetpoint => start_iox::<MotorSetpoint, MotorSetpoint>(peer, domain),
         },
-        Transport::Doorbell => match payload {
-            Payload::EncoderSample => run_doorbell::<EncoderSample, EncoderSample>(&peer, domain),
-            Payload::TrackerFrame => run_doorbell::<TrackerFrame, MatchedSample>(&peer, domain),
-            Payload::Ik => run_doorbell::<IkRequest, IkResponse>(&peer, domain),
-            Payload::MotorSetpoint => run_doorbell::<MotorSetpoint, MotorSetpoint>(&peer, domain),
+        Transport::Doorbell => match peer.payload {
+            Payload::EncoderSample => start_doorbell::<EncoderSample, EncoderSample>(peer, domain),
+            Payload::TrackerFrame => start_doorbell::<TrackerFrame, MatchedSample>(peer, domain),
+            Payload::Ik => start_doorbell::<IkRequest, IkResponse>(peer, domain),
+            Payload::MotorSetpoint => start_doorbell::<MotorSetpoint, MotorSetpoint>(peer, domain),
         },
-        Transport::Futex | Transport::FutexCross => run_futex(&peer, domain),
-        Transport::Uds => run_uds(&peer, socket_dir),
+        Transport::Futex | Transport::FutexCross => start_futex(peer, domain),
+        Transport::Uds => start_uds(peer, socket_dir),
     }
 }
 
@@ -133,7 +198,7 @@ struct Peer<'a> {
     placement: &'a Placement,
 }
 
-impl Peer<'_> {
+impl<'a> Peer<'a> {
     /// Starts the pong with `extra` arguments and places it.
     fn spawn(&self, extra: &[&str]) -> anyhow::Result<PongProcess> {
         let process = PongProcess::spawn(self.transport, self.payload, self.plan, extra)?;
@@ -145,13 +210,25 @@ impl Peer<'_> {
         Ok(process)
     }
 
-    /// Runs the plan against the started pong (see [`measure`]).
-    fn measure(
+    /// The session of the started pong, whose round trip (given its deadline) is
+    /// `round_trip`.
+    fn session(
         &self,
         process: PongProcess,
-        round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
-    ) -> anyhow::Result<PingPong> {
-        measure(self.transport, self.payload, self.plan, process, round_trip)
+        round_trip: impl FnMut(Instant) -> anyhow::Result<()> + 'a,
+    ) -> Session<'a> {
+        let name = if self.plan.pause.is_zero() {
+            baseline_name(self.transport, self.payload)
+        } else {
+            paced_name(self.transport, self.payload)
+        };
+        Session {
+            round_trips: Measurement::new(name.clone(), "ns"),
+            name,
+            plan: self.plan,
+            process,
+            round_trip: Box::new(round_trip),
+        }
     }
 }
 
@@ -177,42 +254,42 @@ fn await_peer(process: &mut PongProcess, ready: impl Fn() -> bool) -> anyhow::Re
     Ok(())
 }
 
-fn run_iox<Req: Message + Default, Resp: Message>(
-    peer: &Peer,
+fn start_iox<'a, Req: Message + Default, Resp: Message>(
+    peer: &Peer<'a>,
     domain: &Domain,
-) -> anyhow::Result<PingPong> {
+) -> anyhow::Result<Session<'a>> {
     let (ping, pong) = service_names(peer.transport, peer.payload);
     let end = IoxEnd::<Req, Resp>::open(domain, &ping, &pong, wait_mode(peer.transport)?)?;
     let mut process = peer.spawn(&["--domain", domain.as_str()])?;
     await_peer(&mut process, || end.peer_ready())?;
-    peer.measure(process, |deadline| {
+    Ok(peer.session(process, move |deadline| {
         end.send(Req::default())?;
         end.receive(deadline).map(drop)
-    })
+    }))
 }
 
-fn run_doorbell<Req: Message + Default, Resp: Message>(
-    peer: &Peer,
+fn start_doorbell<'a, Req: Message + Default, Resp: Message>(
+    peer: &Peer<'a>,
     domain: &Domain,
-) -> anyhow::Result<PingPong> {
+) -> anyhow::Result<Session<'a>> {
     let (ping, pong) = service_names(peer.transport, peer.payload);
     let end = DoorbellEnd::<Req, Resp>::open(domain, "bench-ping", &ping, &pong)?;
     let mut process = peer.spawn(&["--domain", domain.as_str()])?;
     await_peer(&mut process, || end.peer_ready())?;
-    peer.measure(process, |deadline| {
+    Ok(peer.session(process, move |deadline| {
         end.send(Req::default())?;
         end.receive(deadline).map(drop)
-    })
+    }))
 }
 
-fn run_futex(peer: &Peer, domain: &Domain) -> anyhow::Result<PingPong> {
+fn start_futex<'a>(peer: &Peer<'a>, domain: &Domain) -> anyhow::Result<Session<'a>> {
     let name = futex_segment(domain, peer.transport, peer.payload);
     let mut end = FutexEnd::create(&name)?;
     let process = peer.spawn(&["--domain", domain.as_str()])?;
-    peer.measure(process, |deadline| {
+    Ok(peer.session(process, move |deadline| {
         end.send()?;
         end.receive(end.sent(), deadline)
-    })
+    }))
 }
 
 /// The shared-memory segment of a futex ping-pong (unique per domain, transport and payload).
@@ -220,7 +297,7 @@ pub fn futex_segment(domain: &Domain, transport: Transport, payload: Payload) ->
     format!("{domain}-{}-{}", transport.name(), payload.name())
 }
 
-fn run_uds(peer: &Peer, socket_dir: &Path) -> anyhow::Result<PingPong> {
+fn start_uds<'a>(peer: &Peer<'a>, socket_dir: &Path) -> anyhow::Result<Session<'a>> {
     let path = socket_dir.join(format!(
         "sabr-bench-{}-{}.sock",
         std::process::id(),
@@ -236,47 +313,65 @@ fn run_uds(peer: &Peer, socket_dir: &Path) -> anyhow::Result<PingPong> {
         peer.payload.response_bytes(),
         ROUND_TRIP_TIMEOUT,
     )?;
-    peer.measure(process, |_| {
+    Ok(peer.session(process, move |_| {
+        // The socket file lives as long as the session.
+        let _bound = &socket;
         end.send()?;
         end.receive()
-    })
+    }))
 }
 
-/// Runs the plan's round trips with `round_trip` (given its deadline), records the timed
-/// ones, measures the pong's idle CPU use, then releases the pong and checks it exited well.
-fn measure(
-    transport: Transport,
-    payload: Payload,
-    plan: &Plan,
-    peer: PongProcess,
-    mut round_trip: impl FnMut(Instant) -> anyhow::Result<()>,
-) -> anyhow::Result<PingPong> {
-    let name = if plan.pause.is_zero() {
-        baseline_name(transport, payload)
-    } else {
-        paced_name(transport, payload)
-    };
-    for _ in 0..plan.warmup {
-        round_trip(Instant::now() + ROUND_TRIP_TIMEOUT)
-            .with_context(|| format!("{name}: warm-up"))?;
+/// A started ping-pong: its pong process, the measuring side's round trip (given its
+/// deadline), and the round trips recorded so far.
+struct Session<'a> {
+    name: String,
+    plan: &'a Plan,
+    process: PongProcess,
+    round_trip: Box<dyn FnMut(Instant) -> anyhow::Result<()> + 'a>,
+    round_trips: Measurement,
+}
+
+impl Session<'_> {
+    /// Runs `count` round trips, each followed by the plan's pause, recording them if
+    /// `record`.
+    fn run(&mut self, count: u64, record: bool) -> anyhow::Result<()> {
+        let name = &self.name;
+        for index in 0..count {
+            let start = Instant::now();
+            (self.round_trip)(start + ROUND_TRIP_TIMEOUT).with_context(|| {
+                let what = if record {
+                    "round trip"
+                } else {
+                    "warm-up round trip"
+                };
+                format!("{name}: {what} {index}")
+            })?;
+            if record {
+                self.round_trips.record_duration(start.elapsed())?;
+            }
+            std::thread::sleep(self.plan.pause);
+        }
+        Ok(())
     }
-    let mut round_trips = Measurement::new(name.clone(), "ns");
-    for index in 0..plan.samples {
-        let start = Instant::now();
-        round_trip(start + ROUND_TRIP_TIMEOUT)
-            .with_context(|| format!("{name}: round trip {index}"))?;
-        round_trips.record_duration(start.elapsed())?;
-        std::thread::sleep(plan.pause);
+
+    /// Measures the pong's idle CPU use if the plan asks, then releases the pong and checks
+    /// it exited well.
+    fn finish(mut self) -> anyhow::Result<PingPong> {
+        let name = &self.name;
+        let pong_idle = self
+            .plan
+            .idle_window
+            .map(|window| measure_cpu_share(self.process.pid(), window))
+            .transpose()
+            .with_context(|| format!("{name}: idle CPU of the pong process"))?;
+        (self.round_trip)(Instant::now() + ROUND_TRIP_TIMEOUT)
+            .with_context(|| format!("{name}: last round trip"))?;
+        self.process.finish()?;
+        Ok(PingPong {
+            round_trips: self.round_trips,
+            pong_idle,
+        })
     }
-    let pong_idle = measure_cpu_share(peer.pid(), plan.idle_window)
-        .with_context(|| format!("{name}: idle CPU of the pong process"))?;
-    round_trip(Instant::now() + ROUND_TRIP_TIMEOUT)
-        .with_context(|| format!("{name}: last round trip"))?;
-    peer.finish()?;
-    Ok(PingPong {
-        round_trips,
-        pong_idle,
-    })
 }
 
 /// The `sabr-pong` executable beside the running one (cargo builds them side by side).
@@ -362,5 +457,56 @@ impl Drop for PongProcess {
             let _ = self.child.kill();
             let _ = self.child.wait();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan(warmup: u64, samples: u64, rounds: u64) -> Plan {
+        Plan {
+            warmup,
+            samples,
+            rounds,
+            idle_window: None,
+            pause: Duration::ZERO,
+        }
+    }
+
+    #[test]
+    fn slices_hold_every_sample_and_the_pong_answers_every_round_trip() {
+        for (warmup, samples, rounds) in [(2000, 20_000, 10), (10, 23, 10), (10, 7, 10), (5, 30, 1)]
+        {
+            let plan = plan(warmup, samples, rounds);
+            let slices: Vec<u64> = (0..rounds).map(|round| plan.slice_samples(round)).collect();
+            assert_eq!(slices.iter().sum::<u64>(), samples, "{plan:?}");
+            let (min, max) = (slices.iter().min().unwrap(), slices.iter().max().unwrap());
+            assert!(max - min <= 1, "uneven slices {slices:?}");
+            let round_trips = warmup + rounds * plan.slice_warmup() + samples + 1;
+            assert_eq!(plan.pong_count(), round_trips, "{plan:?}");
+        }
+        assert_eq!(plan(2000, 20_000, 10).slice_warmup(), 200);
+    }
+
+    #[test]
+    fn every_session_takes_one_slice_per_round_and_the_first_turn_rotates() {
+        let order: Vec<(u64, usize)> = turns(3, 4).collect();
+        assert_eq!(order.len(), 12);
+        for round in 0..3 {
+            let mut sessions: Vec<usize> = order
+                .iter()
+                .filter(|(r, _)| *r == round)
+                .map(|(_, index)| *index)
+                .collect();
+            assert_eq!(
+                sessions[0], round as usize,
+                "round {round} starts with another"
+            );
+            sessions.sort_unstable();
+            assert_eq!(sessions, [0, 1, 2, 3], "round {round}");
+        }
+        assert_eq!(turns(0, 2).count(), 2, "at least one round");
+        assert_eq!(turns(5, 0).count(), 0);
     }
 }
