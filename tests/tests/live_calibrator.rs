@@ -8,7 +8,7 @@
 //!   the graph fails, and the reason is named.
 //!
 //! Needs the service binaries: `cargo build --release --workspace --bins` before the tests.
-//! Each graph runs about 25 s (release build).
+//! Each graph runs about 37 s (release build).
 
 use sabr_integration_tests::{bin, LaunchedGraph};
 use sabr_model::RobotParams;
@@ -19,15 +19,19 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-/// Longest run of the graph (the session plays about 25 s).
+/// Longest run of the graph (it runs about 37 s).
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 
 /// The graph; `{tip_sphere}` is the rig's `--tip-sphere` choice.
 const GRAPH: &str = r#"
+# A tenth of the paper's session: on a twentieth, `sabr calibrate`'s model-free latency search
+# (seeds 1-8, true latency 23-45 ms) found anything from 0 to 215 ms, so live jitter sometimes
+# put its best delay at the edge of the searched range and the session was refused; on a
+# tenth it found 16-62 ms.
 [[node]]
 name = "rig"
 exec = "sabr-rig"
-args = ["--autoplay", "--duration-scale", "0.05", "--tip-sphere", "{tip_sphere}",
+args = ["--autoplay", "--duration-scale", "0.1", "--tip-sphere", "{tip_sphere}",
         "--autoplay-after", "recorder", "--autoplay-after", "calibrator",
         "--autoplay-delay-s", "0.5"]
 
