@@ -149,7 +149,6 @@ pub fn run(
     probe.listen(&mut graph, &mut hops, plan.window)?;
     probe.listen_to_frames(&mut graph, &mut hops, plan.window / FRAMES_WINDOW_DIVISOR)?;
     let ik = probe.ik_round_trips(&mut graph, &targets, plan)?;
-    drop(probe);
     graph.stop()?;
 
     let notes = hops.notes(latency_ms);
@@ -299,14 +298,23 @@ impl Probe {
         })
     }
 
-    /// Times IK requests to the graph's server, one per [`IK_PERIOD`].
+    /// Times IK requests to the graph's server, one per [`IK_PERIOD`], after dropping the
+    /// bench's subscriptions: the bench is then an IK client and nothing else, as the motion
+    /// node is (a sample rung into its doorbell would wake it while it waits for a response).
     fn ik_round_trips(
-        &mut self,
+        self,
         graph: &mut LiveGraph,
         targets: &[Target],
         plan: &Plan,
     ) -> anyhow::Result<Measurement> {
-        let mut client = IkClient::new(&self.rt)?;
+        let Probe {
+            mut rt,
+            encoders,
+            matched,
+            truth,
+        } = self;
+        drop((encoders, matched, truth));
+        let mut client = IkClient::new(&rt)?;
         let mut round_trips = Measurement::new(IK_ROUND_TRIP, "ns");
         let warmup = plan.ik_warmup();
         let mut next = Instant::now();
@@ -339,7 +347,7 @@ impl Probe {
             }
             if index % 1000 == 999 {
                 graph.check_running()?;
-                if !self.rt.keep_running() {
+                if !rt.keep_running() {
                     bail!("interrupted");
                 }
             }
