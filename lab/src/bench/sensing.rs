@@ -18,7 +18,8 @@
 //!   latency absorbs, e.g. the tracker driver's polling delay, which the simulated latency
 //!   does not include).
 //! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik`, one request per
-//!   millisecond, targets near home.
+//!   millisecond, targets near home, last, with the bench's subscriptions dropped (an IK
+//!   client and nothing else, like the motion node).
 //! - CPU use of every process of the graph over a window while the bench only listens.
 
 use super::compute::{self, Target, SESSION_SEED};
