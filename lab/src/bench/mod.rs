@@ -327,14 +327,10 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
     let mut measured = BTreeMap::new();
     let mut run_group = |transports: &[Transport], payload: Payload, plan: &pingpong::Plan| {
         let rows: Vec<(Transport, Payload)> = transports.iter().map(|&t| (t, payload)).collect();
-        let name = |transport: Transport| {
-            if plan.pause.is_zero() {
-                payload::baseline_name(transport, payload)
-            } else {
-                payload::paced_name(transport, payload)
-            }
-        };
-        let names: Vec<String> = transports.iter().map(|&t| name(t)).collect();
+        let names: Vec<String> = transports
+            .iter()
+            .map(|&t| plan.row_name(t, payload))
+            .collect();
         settings.measuring(names.join(", "));
         let results = match pinning(transports[0], payload, &settings.bin_dir) {
             Ok(pinning) => pingpong::run(&rows, plan, &pinning, &domain, &socket_dir),

@@ -39,10 +39,10 @@ pub struct Plan {
     pub warmup: u64,
     /// Round trips recorded.
     pub samples: u64,
-    /// Slices the recorded round trips are split into. Ping-pongs run together take turns
-    /// slice by slice (see [`run`]), so a change of the machine's speed during the run falls
-    /// on all of them alike; each slice starts with a tenth of the warm-up's round trips per
-    /// round, unrecorded (the other ping-pongs' slices ran in between).
+    /// Slices the recorded round trips are split into (0 counts as 1). Ping-pongs run
+    /// together take turns slice by slice (see [`run`]), so a change of the machine's speed
+    /// during the run falls on all of them alike; each slice starts with `warmup / rounds`
+    /// unrecorded round trips (the other ping-pongs' slices ran in between).
     pub rounds: u64,
     /// Window over which the pong's CPU use is measured while it waits for a message;
     /// `None`: not measured.
@@ -54,21 +54,36 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The name of the row of `transport` and `payload` this plan measures:
+    /// `<transport>/<payload>` back to back, [`paced_name`] paced.
+    pub fn row_name(&self, transport: Transport, payload: Payload) -> String {
+        if self.pause.is_zero() {
+            baseline_name(transport, payload)
+        } else {
+            paced_name(transport, payload)
+        }
+    }
+
+    /// Slices, at least one.
+    fn slices(&self) -> u64 {
+        self.rounds.max(1)
+    }
+
     /// Unrecorded round trips at the start of each slice.
     fn slice_warmup(&self) -> u64 {
-        self.warmup / self.rounds.max(1)
+        self.warmup / self.slices()
     }
 
     /// Recorded round trips of slice `round` (the samples spread as evenly as they go).
     fn slice_samples(&self, round: u64) -> u64 {
-        let rounds = self.rounds.max(1);
-        self.samples / rounds + u64::from(round < self.samples % rounds)
+        let slices = self.slices();
+        self.samples / slices + u64::from(round < self.samples % slices)
     }
 
     /// Messages the pong answers: warm-up, each slice's warm-up and samples, and the final
     /// one that releases it.
     pub fn pong_count(&self) -> u64 {
-        self.warmup + self.rounds.max(1) * self.slice_warmup() + self.samples + 1
+        self.warmup + self.slices() * self.slice_warmup() + self.samples + 1
     }
 }
 
@@ -145,7 +160,7 @@ fn run_here(
             Ok(session)
         })
         .collect();
-    for (round, index) in turns(plan.rounds, sessions.len()) {
+    for (round, index) in turns(plan.slices(), sessions.len()) {
         let slot = &mut sessions[index];
         if let Ok(session) = slot {
             let slice = session
@@ -217,11 +232,7 @@ impl<'a> Peer<'a> {
         process: PongProcess,
         round_trip: impl FnMut(Instant) -> anyhow::Result<()> + 'a,
     ) -> Session<'a> {
-        let name = if self.plan.pause.is_zero() {
-            baseline_name(self.transport, self.payload)
-        } else {
-            paced_name(self.transport, self.payload)
-        };
+        let name = self.plan.row_name(self.transport, self.payload);
         Session {
             round_trips: Measurement::new(name.clone(), "ns"),
             name,
