@@ -27,6 +27,9 @@ const LOG_TAIL_LINES: usize = 15;
 pub const SENSING_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/bench-sensing.toml");
 /// The launch file of the setpoint graph (`launch/graphs/bench-setpoints.toml`).
 pub const SETPOINTS_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/bench-setpoints.toml");
+/// The shipped main job (`launch/graphs/sim-calibration.toml`): the placement of every node,
+/// the motion node included, which the bench graphs lack.
+pub const SHIPPED_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/sim-calibration.toml");
 
 /// The placement `launch_file` gives `node` (executables looked up in `bin_dir`).
 pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Placement> {

@@ -381,15 +381,14 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
     Ok(())
 }
 
-/// The two nodes of the live-graph hop a payload stands for (producer, consumer) and the
-/// bench's launch file they are in; a producer the bench graphs lack (the motion node) is
-/// placed like the consumer.
-fn hop_nodes(payload: Payload) -> (&'static str, &'static str, &'static str) {
+/// The two nodes of the live-graph hop a payload stands for (producer, consumer), placed as
+/// the shipped main job places them.
+fn hop_nodes(payload: Payload) -> (&'static str, &'static str) {
     match payload {
-        Payload::EncoderSample => (graph::SENSING_LAUNCH_FILE, "encoders", "sync"),
-        Payload::TrackerFrame => (graph::SENSING_LAUNCH_FILE, "tracker", "sync"),
-        Payload::Ik => (graph::SENSING_LAUNCH_FILE, "ik", "ik"),
-        Payload::MotorSetpoint => (graph::SETPOINTS_LAUNCH_FILE, "rig", "rig"),
+        Payload::EncoderSample => ("encoders", "sync"),
+        Payload::TrackerFrame => ("tracker", "sync"),
+        Payload::Ik => ("motion", "ik"),
+        Payload::MotorSetpoint => ("motion", "rig"),
     }
 }
 
@@ -417,10 +416,10 @@ fn pinning(
             })
         }
         _ => {
-            let (file, producer, consumer) = hop_nodes(payload);
+            let (producer, consumer) = hop_nodes(payload);
             Ok(pingpong::Pinning {
-                ping: graph::placement_of(file, producer, bin_dir)?,
-                pong: graph::placement_of(file, consumer, bin_dir)?,
+                ping: graph::placement_of(graph::SHIPPED_LAUNCH_FILE, producer, bin_dir)?,
+                pong: graph::placement_of(graph::SHIPPED_LAUNCH_FILE, consumer, bin_dir)?,
             })
         }
     }
@@ -524,6 +523,51 @@ fn run_compute(settings: &Settings, out: &Path, results: &mut Results) {
                 "warning: cannot remove {}: {error}",
                 work.display()
             ));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn baselines_are_placed_as_the_shipped_graph_places_each_hop() {
+        let bin_dir = tempfile::tempdir().unwrap();
+        for exec in [
+            "rig",
+            "encoders",
+            "tracker",
+            "sync",
+            "recorder",
+            "ik",
+            "calibrator",
+            "motion",
+        ] {
+            std::fs::write(bin_dir.path().join(format!("sabr-{exec}")), "").unwrap();
+        }
+        let shipped = |node: &str| {
+            graph::placement_of(graph::SHIPPED_LAUNCH_FILE, node, bin_dir.path()).unwrap()
+        };
+        let priority = |placement: &Placement| placement.sched.map_or(0, |s| s.priority());
+        for payload in Payload::ALL {
+            let (producer, consumer) = hop_nodes(payload);
+            let placed = pinning(Transport::Doorbell, payload, bin_dir.path()).unwrap();
+            assert_eq!(placed.ping, shipped(producer), "{}", payload.name());
+            assert_eq!(placed.pong, shipped(consumer), "{}", payload.name());
+        }
+        // The consumers of the event-driven hops outrank their producers on the shared core,
+        // so a ring runs the consumer at once and its answer needs no wake-up.
+        for payload in [Payload::EncoderSample, Payload::TrackerFrame, Payload::Ik] {
+            let placed = pinning(Transport::Doorbell, payload, bin_dir.path()).unwrap();
+            assert_eq!(placed.ping.cpus, placed.pong.cpus, "{}", payload.name());
+            assert!(
+                priority(&placed.pong) > priority(&placed.ping),
+                "{}: {} is not above {}",
+                payload.name(),
+                placed.pong,
+                placed.ping
+            );
         }
     }
 }

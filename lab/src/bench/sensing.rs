@@ -18,13 +18,14 @@
 //!   latency absorbs, e.g. the tracker driver's polling delay, which the simulated latency
 //!   does not include).
 //! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik`, one request per
-//!   millisecond, targets near home, last, with the bench's subscriptions dropped (an IK
-//!   client and nothing else, like the motion node).
+//!   millisecond, targets near home, last, with the bench's subscriptions dropped and its
+//!   thread placed like the motion node (an IK client and nothing else, where the graph's
+//!   client runs).
 //! - CPU use of every process of the graph over a window while the bench only listens.
 
 use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
-use super::graph::{GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE};
+use super::graph::{self, GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE, SHIPPED_LAUNCH_FILE};
 use super::hops::{
     Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
     TRACKER_FRAME_TO_MATCHED,
@@ -33,6 +34,7 @@ use super::payload::IK_PERIOD;
 use super::stats::{format_ns, Measurement};
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
+use sabr_launcher::placement::Placement;
 use sabr_model::HOME_JOINTS;
 use sabr_node::msgs::{
     services, EncoderSample, IkRequest, IkStatus, MatchedSample, RigTruth, TrackerFrame,
@@ -149,10 +151,12 @@ pub fn run(
     probe.discard_pending(&mut hops)?;
     probe.listen(&mut graph, &mut hops, plan.window)?;
     probe.listen_to_frames(&mut graph, &mut hops, plan.window / FRAMES_WINDOW_DIVISOR)?;
-    let ik = probe.ik_round_trips(&mut graph, &targets, plan)?;
+    let client = graph::placement_of(SHIPPED_LAUNCH_FILE, "motion", bin_dir)?;
+    let (ik, ik_note) = probe.ik_round_trips(&mut graph, &targets, plan, &client)?;
     graph.stop()?;
 
-    let notes = hops.notes(latency_ms);
+    let mut notes = hops.notes(latency_ms);
+    notes.push(ik_note);
     let mut measurements = Vec::from(hops.into_measurements()?);
     measurements.push(ik);
     Ok(GraphMeasured {
@@ -299,15 +303,18 @@ impl Probe {
         })
     }
 
-    /// Times IK requests to the graph's server, one per [`IK_PERIOD`], after dropping the
-    /// bench's subscriptions: the bench is then an IK client and nothing else, as the motion
-    /// node is (a sample rung into its doorbell would wake it while it waits for a response).
+    /// Times IK requests to the graph's server, one per [`IK_PERIOD`], as the motion node
+    /// makes them: after dropping the bench's subscriptions (the bench is then an IK client
+    /// and nothing else; a sample rung into its doorbell would wake it while it waits for a
+    /// response), and from the calling thread placed as `client` (the motion node's place;
+    /// the bench listened above the graph before). Also returns the note on the placement.
     fn ik_round_trips(
         self,
         graph: &mut LiveGraph,
         targets: &[Target],
         plan: &Plan,
-    ) -> anyhow::Result<Measurement> {
+        client: &Placement,
+    ) -> anyhow::Result<(Measurement, String)> {
         let Probe {
             mut rt,
             encoders,
@@ -315,6 +322,18 @@ impl Probe {
             truth,
         } = self;
         drop((encoders, matched, truth));
+        let note = match client.probe() {
+            Ok(()) => {
+                let prepared = client.prepare().map_err(anyhow::Error::msg)?;
+                prepared
+                    .apply()
+                    .with_context(|| format!("cannot place the bench's IK client: {client}"))?;
+                format!("the bench's IK client ran at {client}, as the motion node does")
+            }
+            Err(reason) => {
+                format!("the bench's IK client kept the listening thread's placement ({reason})")
+            }
+        };
         let mut client = IkClient::new(&rt)?;
         let mut round_trips = Measurement::new(IK_ROUND_TRIP, "ns");
         let warmup = plan.ik_warmup();
@@ -353,7 +372,7 @@ impl Probe {
                 }
             }
         }
-        Ok(round_trips)
+        Ok((round_trips, note))
     }
 }
 
@@ -717,7 +736,7 @@ mod tests {
         };
         let shipped = parse(
             "sim-calibration.toml",
-            include_str!("../../../launch/graphs/sim-calibration.toml"),
+            super::super::graph::SHIPPED_LAUNCH_FILE,
         );
         for (name, text) in [
             ("bench-sensing.toml", SENSING_LAUNCH_FILE),
