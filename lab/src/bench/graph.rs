@@ -31,6 +31,26 @@ pub const SETPOINTS_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/ben
 /// the motion node included, which the bench graphs lack.
 pub const SHIPPED_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/sim-calibration.toml");
 
+/// A directory holding an empty stand-in executable `sabr-<node>` for every node of the
+/// shipped graphs, so that their launch files parse in tests.
+#[cfg(test)]
+pub fn stand_in_bin_dir() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for node in [
+        "rig",
+        "encoders",
+        "tracker",
+        "sync",
+        "recorder",
+        "ik",
+        "calibrator",
+        "motion",
+    ] {
+        std::fs::write(dir.path().join(format!("sabr-{node}")), "").unwrap();
+    }
+    dir
+}
+
 /// The placement `launch_file` gives `node` (executables looked up in `bin_dir`).
 pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Placement> {
     let graph = spec::parse(Path::new("bench graph"), launch_file, bin_dir)?;

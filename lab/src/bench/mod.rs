@@ -533,19 +533,7 @@ mod tests {
 
     #[test]
     fn baselines_are_placed_as_the_shipped_graph_places_each_hop() {
-        let bin_dir = tempfile::tempdir().unwrap();
-        for exec in [
-            "rig",
-            "encoders",
-            "tracker",
-            "sync",
-            "recorder",
-            "ik",
-            "calibrator",
-            "motion",
-        ] {
-            std::fs::write(bin_dir.path().join(format!("sabr-{exec}")), "").unwrap();
-        }
+        let bin_dir = graph::stand_in_bin_dir();
         let shipped = |node: &str| {
             graph::placement_of(graph::SHIPPED_LAUNCH_FILE, node, bin_dir.path()).unwrap()
         };

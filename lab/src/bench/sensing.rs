@@ -682,10 +682,7 @@ mod tests {
 
     #[test]
     fn launch_file_runs_the_chain_and_the_ik_server_with_the_sessions_true_latency() {
-        let bin_dir = tempfile::tempdir().unwrap();
-        for exec in NODES.map(|node| format!("sabr-{node}")) {
-            std::fs::write(bin_dir.path().join(exec), "").unwrap();
-        }
+        let bin_dir = graph::stand_in_bin_dir();
         let graph = sabr_launcher::spec::parse(
             Path::new("bench-sensing.toml"),
             SENSING_LAUNCH_FILE,
@@ -718,32 +715,14 @@ mod tests {
 
     #[test]
     fn the_bench_places_every_node_as_the_shipped_graphs_do() {
-        let bin_dir = tempfile::tempdir().unwrap();
-        for exec in [
-            "rig",
-            "encoders",
-            "tracker",
-            "sync",
-            "recorder",
-            "ik",
-            "calibrator",
-            "motion",
-        ] {
-            std::fs::write(bin_dir.path().join(format!("sabr-{exec}")), "").unwrap();
-        }
+        let bin_dir = graph::stand_in_bin_dir();
         let parse = |name: &str, text: &str| {
             sabr_launcher::spec::parse(Path::new(name), text, bin_dir.path()).unwrap()
         };
-        let shipped = parse(
-            "sim-calibration.toml",
-            super::super::graph::SHIPPED_LAUNCH_FILE,
-        );
+        let shipped = parse("sim-calibration.toml", SHIPPED_LAUNCH_FILE);
         for (name, text) in [
             ("bench-sensing.toml", SENSING_LAUNCH_FILE),
-            (
-                "bench-setpoints.toml",
-                super::super::graph::SETPOINTS_LAUNCH_FILE,
-            ),
+            ("bench-setpoints.toml", graph::SETPOINTS_LAUNCH_FILE),
         ] {
             let graph = parse(name, text);
             assert_eq!(
