@@ -211,11 +211,14 @@ struct LastRead {
 /// when a ring finds no one listening on a consumer's doorbell (its node ended; a replacement
 /// may be listed already), and at least every [`CONSUMERS_REFRESH`] otherwise: reading them
 /// copies the whole port list out of shared memory into two heap buffers, the largest cost
-/// of a ring had it been done on every send. So ports that appear (a restarted node) are rung from the next
-/// read on, ports that went away (iceoryx2 removes dead nodes' ports) are not rung after it,
-/// and a port whose doorbell could not be opened yet is tried again on the next ring; a
-/// notifier per consumer node is opened when its first port appears and closed when its last
-/// one goes.
+/// of a ring had it been done on every send. Unless their number changed, they are read
+/// after the ports read last were rung (then only the new ones are rung): a producer sending
+/// less often than the refresh period (the tracker at 20 Hz) would otherwise read them
+/// before every ring, cold, while its consumers wait. So ports that appear (a restarted node)
+/// are rung from the next read on, ports that went away (iceoryx2 removes dead nodes' ports)
+/// are not rung after it, and a port whose doorbell could not be opened yet is tried again on
+/// the next ring; a notifier per consumer node is opened when its first port appears and
+/// closed when its last one goes.
 pub struct Ringer {
     node: Rc<Node<Doorbell>>,
     service: String,
@@ -241,9 +244,13 @@ impl Ringer {
 
     /// Rings the consumer ports of the service (all of them, or only the port with id `only`),
     /// `listed` being how many consumer ports the service's dynamic config counts now (a
-    /// cheap read). When the ports are due to be read (see [`Ringer`]; also when `only` is
-    /// none of the ports read last), `list` visits them (node id, port name, port id; ports
-    /// without a doorbell id are skipped). Returns how many were rung.
+    /// cheap read). `list` visits the ports (node id, port name, port id; ports without a
+    /// doorbell id are skipped) when they are to be read (see [`Ringer`]): before ringing when
+    /// they changed (their number differs from the last read, `only` is none of the ports
+    /// read last, or nothing was read yet), else after ringing the ports read last, when
+    /// their refresh is due or a doorbell had no listener, and then only the ports that are
+    /// new are rung. A refresh thus never delays the consumers already known. Returns how
+    /// many ports were rung.
     pub(crate) fn ring(
         &self,
         listed: usize,
@@ -253,35 +260,38 @@ impl Ringer {
         let now = Instant::now();
         let mut consumers = self.consumers.borrow_mut();
         let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
-        let due = unknown
-            || self.last_read.get().is_none_or(|last| {
-                last.listed != listed || now.duration_since(last.at) >= CONSUMERS_REFRESH
-            });
-        if !due {
-            let (rung, unheard) = self.notify(&consumers, only)?;
-            if !unheard {
-                return Ok(rung);
-            }
-            // No one listens on a doorbell any more: its node ended, and a replacement may
-            // already be listed with the same number of ports. Read them again.
+        let last_read = self.last_read.get();
+        if unknown || last_read.is_none_or(|last| last.listed != listed) {
+            self.read(&mut consumers, listed, now, list);
+            return Ok(self.notify(&consumers, only, &[])?.0);
         }
-        self.read(&mut consumers, listed, now, list);
-        Ok(self.notify(&consumers, only)?.0)
+        let (rung, unheard) = self.notify(&consumers, only, &[])?;
+        let stale = last_read.is_some_and(|last| now.duration_since(last.at) >= CONSUMERS_REFRESH);
+        if !(stale || unheard) {
+            return Ok(rung);
+        }
+        // Due for a refresh, or a doorbell had no listener (its node ended; a replacement
+        // may already be listed with the same number of ports): read them again and ring
+        // the ones not rung above.
+        let Some(previous) = self.read(&mut consumers, listed, now, list) else {
+            return Ok(rung);
+        };
+        Ok(rung + self.notify(&consumers, only, &previous)?.0)
     }
 
-    /// Rings `consumers` (all of them, or only the port with id `only`); returns how many
-    /// and whether any doorbell rung had no listener.
+    /// Rings `consumers` (all of them, or only the port with id `only`) except those in
+    /// `rung_already`; returns how many and whether any doorbell rung had no listener.
     fn notify(
         &self,
         consumers: &[(Consumer, Rc<Notifier<Doorbell>>)],
         only: Option<u128>,
+        rung_already: &[(Consumer, Rc<Notifier<Doorbell>>)],
     ) -> Result<(usize, bool), NodeError> {
         let mut rung = 0;
         let mut unheard = false;
-        for (consumer, notifier) in consumers
-            .iter()
-            .filter(|(c, _)| only.is_none_or(|port| c.port == port))
-        {
+        for (consumer, notifier) in consumers.iter().filter(|(c, _)| {
+            only.is_none_or(|port| c.port == port) && rung_already.iter().all(|(r, _)| r != c)
+        }) {
             let listeners = notifier
                 .notify_with_custom_event_id(consumer.id)
                 .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
@@ -293,13 +303,14 @@ impl Ringer {
 
     /// Reads the consumer ports `list` visits into `consumers`, connecting to new ones, and
     /// notes the read (at `now`, with `listed` ports counted) unless a consumer was left out.
+    /// Returns the list it replaced if the ports changed.
     fn read(
         &self,
         consumers: &mut Vec<(Consumer, Rc<Notifier<Doorbell>>)>,
         listed: usize,
         now: Instant,
         list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
-    ) {
+    ) -> Option<Vec<(Consumer, Rc<Notifier<Doorbell>>)>> {
         let mut current = self.current.borrow_mut();
         current.clear();
         list(&mut |node, port_name, port| {
@@ -312,12 +323,14 @@ impl Ringer {
                 .iter()
                 .zip(current.iter())
                 .all(|((c, _), n)| c == n);
-        if !unchanged {
-            *consumers = self.connect(consumers, &current);
-        }
+        let replaced = (!unchanged).then(|| {
+            let connected = self.connect(consumers, &current);
+            std::mem::replace(consumers, connected)
+        });
         let complete = consumers.len() == current.len();
         self.last_read
             .set(complete.then_some(LastRead { listed, at: now }));
+        replaced
     }
 
     /// Notifiers for `current`, reusing those of `previous` by node; a consumer whose
@@ -367,6 +380,8 @@ impl Ringer {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::{release_domain, Domain};
+    use iceoryx2::prelude::NodeBuilder;
 
     #[test]
     fn port_names_carry_event_ids_in_range() {
@@ -376,5 +391,60 @@ mod tests {
         for other in ["doorbell-0", "doorbell-16", "doorbell-x", "publisher", ""] {
             assert_eq!(event_id_of(&name(other)), None, "{other:?}");
         }
+    }
+
+    #[test]
+    fn known_consumers_are_rung_before_a_due_refresh_reads_the_ports() {
+        let domain = Domain::new(&format!("d-ring-order-{}", std::process::id())).unwrap();
+        {
+            let node = || {
+                let node = NodeBuilder::new()
+                    .config(&domain.iceoryx_config())
+                    .create::<Doorbell>()
+                    .unwrap();
+                Rc::new(node)
+            };
+            let (producer, consumer) = (node(), node());
+            let bell = Bell::open(&consumer).unwrap();
+            let (first, second) = (bell.allocate().unwrap(), bell.allocate().unwrap());
+            let ringer = Ringer::new(&producer, "sabr/test/ring-order");
+            // Whether the port rang before the ports were read (taking the ring).
+            let rang = |inbox: &Inbox| inbox.wait(Duration::ZERO).unwrap();
+            let rung_at_read = Cell::new(None);
+            let list_one = |visit: &mut dyn FnMut(UniqueNodeId, &PortName, u128)| {
+                rung_at_read.set(Some(rang(&first)));
+                visit(*consumer.id(), first.port_name(), 1);
+            };
+
+            // The first ring reads the ports before ringing.
+            assert_eq!(ringer.ring(1, None, list_one).unwrap(), 1);
+            assert_eq!(rung_at_read.take(), Some(false));
+            assert!(rang(&first));
+            // Within the refresh period the ports are not read again.
+            assert_eq!(ringer.ring(1, None, |_| panic!("read")).unwrap(), 1);
+            assert!(rang(&first));
+            // A due refresh reads them after ringing the known port.
+            std::thread::sleep(CONSUMERS_REFRESH);
+            assert_eq!(ringer.ring(1, None, list_one).unwrap(), 1);
+            assert_eq!(rung_at_read.take(), Some(true));
+
+            // A port that replaced the known one (the count unchanged) is rung after the read.
+            std::thread::sleep(CONSUMERS_REFRESH);
+            let list_second = |visit: &mut dyn FnMut(UniqueNodeId, &PortName, u128)| {
+                visit(*consumer.id(), second.port_name(), 2);
+            };
+            assert_eq!(ringer.ring(1, None, list_second).unwrap(), 2);
+            assert!(rang(&first) && rang(&second));
+            // A changed count reads the ports before ringing any.
+            let list_both = |visit: &mut dyn FnMut(UniqueNodeId, &PortName, u128)| {
+                rung_at_read.set(Some(rang(&first) || rang(&second)));
+                visit(*consumer.id(), first.port_name(), 1);
+                visit(*consumer.id(), second.port_name(), 2);
+            };
+            assert_eq!(ringer.ring(2, None, list_both).unwrap(), 2);
+            assert_eq!(rung_at_read.take(), Some(false));
+        }
+        let left = release_domain(&domain);
+        assert!(left.is_empty(), "left behind: {left:?}");
     }
 }
