@@ -28,6 +28,7 @@ use crate::command::{Baud, CommSettings, Command, PhsrFilter, TrackingPriority};
 use crate::error::DeviceError;
 use crate::error::ReplyError;
 use crate::framing::{FramerStats, RawReply, ReplyFramer};
+use crate::pacing::PollPacer;
 use crate::reply::{ReplyOptions, TrackingReply};
 use crate::text::{
     parse_acknowledgement, parse_phsr, reject_device_error, Acknowledgement, PortHandleStatus,
@@ -56,6 +57,10 @@ pub struct DriverConfig {
     pub baud_settle: Duration,
     /// Pause between BX polls while the frame number has not changed.
     pub poll_interval: Duration,
+    /// How long before the next frame is due (by the recent intervals between frames)
+    /// polling resumes after a frame; until then it pauses (see [`crate::pacing`]). A lead
+    /// as long as the frame period polls without pauses.
+    pub poll_lead: Duration,
     /// [`NdiDriver::next_frame`] fails if no new frame number arrives within this.
     pub stall_timeout: Duration,
     /// BX polls [`NdiDriver::next_frame`] sends again after one went unanswered within
@@ -67,8 +72,8 @@ pub struct DriverConfig {
 
 impl DriverConfig {
     /// Defaults for `path`: 115200 baud, BX 0x0001, dynamic priority, 200 ms reply deadline,
-    /// 3 s for slow commands, 1 ms poll interval, 500 ms stall limit (10 frames at 20 Hz),
-    /// 2 BX polls sent again after a time-out.
+    /// 3 s for slow commands, 1 ms poll interval resuming 5 ms before a frame is due, 500 ms
+    /// stall limit (10 frames at 20 Hz), 2 BX polls sent again after a time-out.
     pub fn new(path: impl Into<String>) -> Self {
         DriverConfig {
             path: path.into(),
@@ -79,6 +84,7 @@ impl DriverConfig {
             slow_timeout: Duration::from_secs(3),
             baud_settle: Duration::from_millis(50),
             poll_interval: Duration::from_millis(1),
+            poll_lead: Duration::from_millis(5),
             stall_timeout: Duration::from_millis(500),
             poll_retries: 2,
         }
@@ -170,6 +176,9 @@ pub struct DriverStats {
     pub timeouts: u64,
     /// BX polls sent again after a time-out (see [`DriverConfig::poll_retries`]).
     pub retried_polls: u64,
+    /// New frames that were there already at the first poll after a pause: sooner than the
+    /// recent intervals between frames said (see [`crate::pacing`]).
+    pub early_frames: u64,
     /// Commands answered `ERRORxx`.
     pub device_errors: u64,
     /// Framing counters: good replies, rejected replies (bad CRC, garbage, ...), bytes dropped.
@@ -196,6 +205,7 @@ pub struct NdiDriver {
     tracking: bool,
     last_frame: Option<u32>,
     last_frame_at: Instant,
+    pacer: PollPacer,
     availability: AvailabilityEstimator,
     stats: DriverStats,
 }
@@ -226,6 +236,7 @@ impl NdiDriver {
                 path: config.path.clone(),
                 source,
             })?;
+        let pacer = PollPacer::new(config.poll_interval, config.poll_lead);
         let mut driver = NdiDriver {
             port,
             framer: ReplyFramer::new(),
@@ -236,6 +247,7 @@ impl NdiDriver {
             tracking: false,
             last_frame: None,
             last_frame_at: Instant::now(),
+            pacer,
             availability: AvailabilityEstimator::new(),
             stats: DriverStats::default(),
         };
@@ -354,20 +366,24 @@ impl NdiDriver {
         })
     }
 
-    /// Polls until the frame number differs from the last one returned (waiting
-    /// `poll_interval` between polls, and after the arrival of the last frame returned before
-    /// the first one). A bad reply is returned as an error (and counted); the
-    /// next call goes on polling. An unanswered poll is sent again up to
-    /// [`DriverConfig::poll_retries`] times in a row (counted) before it is
-    /// [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
+    /// Polls until the frame number differs from the last one returned, waiting
+    /// `poll_interval` between polls. The first poll waits until `poll_lead` before the next
+    /// frame is due by the recent intervals between frames, at least `poll_interval` after
+    /// the arrival of the last frame returned (see [`crate::pacing`]). A bad reply is
+    /// returned as an error (and counted); the next call goes on polling. An unanswered poll
+    /// is sent again up to [`DriverConfig::poll_retries`] times in a row (counted) before it
+    /// is [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
     /// TSTART) is [`DriverError::Stalled`].
     pub fn next_frame(&mut self) -> Result<Stamped, DriverError> {
-        // The frame returned last arrived at `last_frame_at`; polling again sooner than a poll
-        // interval later would only find it again, and would keep the CPU and the port busy
-        // while the consumers of that frame wait to run.
-        let next_poll = self.last_frame_at + self.config.poll_interval;
-        std::thread::sleep(next_poll.saturating_duration_since(Instant::now()));
+        // Polling sooner would only find the frame returned last again, and would keep the
+        // CPU and the port busy while the consumers of that frame wait to run.
+        let first_poll = self
+            .pacer
+            .first_poll_at()
+            .unwrap_or(self.last_frame_at + self.config.poll_interval);
+        std::thread::sleep(first_poll.saturating_duration_since(Instant::now()));
         let mut unanswered = 0;
+        let mut answered = 0;
         loop {
             let stamped = match self.poll() {
                 Ok(stamped) => stamped,
@@ -379,11 +395,15 @@ impl NdiDriver {
                 Err(error) => return Err(error),
             };
             unanswered = 0;
+            answered += 1;
             let frame = stamped.reply.frame();
             if frame != self.last_frame {
                 self.last_frame = frame;
                 self.last_frame_at = stamped.arrival;
                 self.stats.frames += 1;
+                if self.pacer.frame_arrived(stamped.arrival, answered == 1) {
+                    self.stats.early_frames += 1;
+                }
                 return Ok(stamped);
             }
             let waited = stamped

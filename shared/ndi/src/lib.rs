@@ -11,7 +11,8 @@
 //! - [`server`]: the device side, an [`NdiServer`] state machine for the simulated rig, fed by a
 //!   [`FrameSource`]; [`pty`]: a pseudo-terminal to serve it on.
 //! - [`driver`]: the host side, [`NdiDriver`], over a real serial port (or the rig's PTY);
-//!   [`availability`]: when a polled frame became available at the device.
+//!   [`availability`]: when a polled frame became available at the device; [`pacing`]: when to
+//!   start polling for the next frame.
 //!
 //! Units: positions in millimetres in the tracker frame `S`, quaternions (q0, qx, qy, qz) unitless.
 //! Every malformed input is a typed error, never a panic.
@@ -23,6 +24,7 @@ pub mod crc;
 pub mod driver;
 pub mod error;
 pub mod framing;
+pub mod pacing;
 pub mod pty;
 pub mod reply;
 pub mod server;
@@ -38,6 +40,7 @@ pub use crc::crc16;
 pub use driver::{CommandWarning, DriverConfig, DriverError, DriverStats, NdiDriver, Stamped};
 pub use error::{DeviceError, EncodeError, ReplyError};
 pub use framing::{decode_reply, FramerStats, RawReply, ReadError, ReplyFramer, ReplyReader};
+pub use pacing::PollPacer;
 pub use pty::{Pty, PtyError, ServeStats};
 pub use reply::{
     ActiveMarker, HandleReading, HandleStatus, MarkerPosition, ReplyOptions, ToolInfo,

@@ -223,6 +223,50 @@ fn a_new_frame_is_not_polled_for_within_a_poll_interval_of_the_last() {
 }
 
 #[test]
+fn polling_pauses_between_frames_and_still_brackets_each_frame_within_a_poll_interval() {
+    // A camera at 20 Hz, polled every millisecond: without pauses about 50 polls per frame.
+    let start = Instant::now();
+    let rig = serve(move || {
+        let frame = 100 + (start.elapsed().as_millis() / 50) as u32;
+        Some(SimFrame {
+            frame,
+            readings: readings(frame),
+        })
+    });
+    let config = config(&rig.path);
+    let (poll_interval, lead) = (config.poll_interval, config.poll_lead);
+    assert_eq!(
+        (poll_interval, lead),
+        (Duration::from_millis(1), Duration::from_millis(5))
+    );
+    let mut driver = NdiDriver::connect(config).unwrap();
+    // The first frames teach the driver the interval.
+    for _ in 0..5 {
+        driver.next_frame().unwrap();
+    }
+    let before = driver.stats();
+    let frames = 20;
+    let mut half_widths: Vec<i64> = (0..frames)
+        .map(|_| driver.next_frame().unwrap().available_half_width_ns)
+        .collect();
+    let stats = driver.stats();
+    let polls_per_frame = (stats.polls - before.polls) as f64 / f64::from(frames);
+    assert!(
+        polls_per_frame < 15.0,
+        "{polls_per_frame} polls per frame; {stats:?}"
+    );
+    assert!(stats.early_frames <= 2, "{stats:?}");
+    half_widths.sort_unstable();
+    let median = Duration::from_nanos(half_widths[half_widths.len() / 2] as u64);
+    assert!(
+        median <= poll_interval,
+        "median bracket half-width {median:?}: {half_widths:?}"
+    );
+    drop(driver);
+    rig.shut_down();
+}
+
+#[test]
 fn a_silent_tracker_is_a_timeout_not_a_hang() {
     // Nobody serves the terminal: INIT, the break and the RESET wait all time out.
     let pty = Pty::open().unwrap();

@@ -1,0 +1,207 @@
+//! When to start polling for the next frame.
+//!
+//! A tracker makes frames at a steady rate (a Polaris at 20 or 60 Hz) and only answers when
+//! polled, so the driver learns of a new frame at the first poll that carries its number. To
+//! know when a frame became available within a poll interval ([`crate::availability`]), the
+//! polls just before and just after it must be one poll interval apart; the polls in the rest
+//! of the frame period only find the previous frame again. Every one of them costs the host a
+//! write, a read and two wake-ups, and the device an answer (at 20 Hz and a 1 ms interval,
+//! about 49 of every 50 polls).
+//!
+//! [`PollPacer`] remembers the arrivals of the last few new frames and predicts the next one:
+//! the frame period is the median interval between them (robust to a skipped frame and to a
+//! late one), and each remembered arrival, carried forward by whole periods, predicts the
+//! next; the earliest prediction counts, so one late frame does not make the next look
+//! early. After a frame, polling pauses until a lead time before that prediction; from then
+//! on the driver polls every poll interval until the frame is there, as without a pause. So
+//! the bracket of every frame is as narrow as before.
+//!
+//! A frame that is there already at the first poll after a pause came sooner than predicted
+//! (the device's rate went up, or a frame was earlier than the lead allows for): its bracket
+//! is the pause, and the pacer forgets the arrivals, so that polling goes on without pauses
+//! until it has learnt them again. A frame that is late only means more polls at the poll
+//! interval.
+//!
+//! Times are [`Instant`]s passed in by the caller (no I/O).
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+/// New-frame arrivals remembered.
+const ARRIVALS_REMEMBERED: usize = 9;
+/// Arrivals needed before polling pauses after a frame (three intervals).
+const ARRIVALS_NEEDED: usize = 4;
+
+/// When to send the first poll for the next frame, from the arrivals of the frames before it
+/// (see the module documentation).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PollPacer {
+    poll_interval: Duration,
+    lead: Duration,
+    /// Arrivals of the last new frames, newest last.
+    arrivals: VecDeque<Instant>,
+}
+
+impl PollPacer {
+    /// A pacer for polls `poll_interval` apart that resume `lead` before a frame is due.
+    pub fn new(poll_interval: Duration, lead: Duration) -> Self {
+        PollPacer {
+            poll_interval,
+            lead,
+            arrivals: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
+        }
+    }
+
+    /// The frame period: the median interval between the remembered arrivals (`None` with
+    /// fewer than [`ARRIVALS_NEEDED`]).
+    pub fn period(&self) -> Option<Duration> {
+        if self.arrivals.len() < ARRIVALS_NEEDED {
+            return None;
+        }
+        let mut intervals = [Duration::ZERO; ARRIVALS_REMEMBERED - 1];
+        let count = self.arrivals.len() - 1;
+        for (interval, (earlier, later)) in intervals
+            .iter_mut()
+            .zip(self.arrivals.iter().zip(self.arrivals.iter().skip(1)))
+        {
+            *interval = later.saturating_duration_since(*earlier);
+        }
+        let intervals = &mut intervals[..count];
+        intervals.sort_unstable();
+        Some(intervals[count / 2])
+    }
+
+    /// How long after the last new frame polling resumes: `lead` before the next frame is
+    /// predicted, at least one poll interval (that alone until the period is known).
+    pub fn pause(&self) -> Duration {
+        let (Some(period), Some(&last)) = (self.period(), self.arrivals.back()) else {
+            return self.poll_interval;
+        };
+        if period.is_zero() {
+            return self.poll_interval;
+        }
+        let predicted = self
+            .arrivals
+            .iter()
+            .map(|&arrival| {
+                let since = last.saturating_duration_since(arrival);
+                let periods = (since.as_secs_f64() / period.as_secs_f64()).round() as u32 + 1;
+                arrival + period * periods
+            })
+            .min()
+            .unwrap_or(last + period);
+        predicted
+            .saturating_duration_since(last)
+            .saturating_sub(self.lead)
+            .max(self.poll_interval)
+    }
+
+    /// When to send the first poll for the next frame (`None` before the first frame: at
+    /// once).
+    pub fn first_poll_at(&self) -> Option<Instant> {
+        self.arrivals.back().map(|&last| last + self.pause())
+    }
+
+    /// A new frame arrived at `arrival`, seen by the first poll sent since the previous frame
+    /// if `at_first_poll`. Returns true if that poll followed a pause longer than the poll
+    /// interval: the frame came sooner than predicted, its bracket is the pause, and the
+    /// arrivals before it are forgotten.
+    pub fn frame_arrived(&mut self, arrival: Instant, at_first_poll: bool) -> bool {
+        let early = at_first_poll && self.pause() > self.poll_interval;
+        if early {
+            self.arrivals.clear();
+        }
+        if self.arrivals.len() == ARRIVALS_REMEMBERED {
+            self.arrivals.pop_front();
+        }
+        self.arrivals.push_back(arrival);
+        early
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: Duration = Duration::from_millis(1);
+
+    /// A pacer (1 ms polls, 5 ms lead) fed new frames arriving at `arrivals_ms` after `start`,
+    /// none of them early.
+    fn fed(start: Instant, arrivals_ms: &[u64]) -> PollPacer {
+        let mut pacer = PollPacer::new(MS, 5 * MS);
+        for &ms in arrivals_ms {
+            assert!(
+                !pacer.frame_arrived(start + Duration::from_millis(ms), false),
+                "{ms} ms"
+            );
+        }
+        pacer
+    }
+
+    #[test]
+    fn polling_pauses_until_the_lead_before_the_next_frame_once_three_intervals_are_known() {
+        let start = Instant::now();
+        assert_eq!(PollPacer::new(MS, 5 * MS).first_poll_at(), None);
+        let pacer = fed(start, &[0, 50, 100]);
+        assert_eq!((pacer.period(), pacer.pause()), (None, MS));
+        assert_eq!(pacer.first_poll_at(), Some(start + 101 * MS));
+        let pacer = fed(start, &[0, 50, 100, 150]);
+        assert_eq!((pacer.period(), pacer.pause()), (Some(50 * MS), 45 * MS));
+        assert_eq!(pacer.first_poll_at(), Some(start + 195 * MS));
+    }
+
+    #[test]
+    fn a_late_frame_does_not_move_the_next_one_and_a_skipped_one_does_not_change_the_period() {
+        let start = Instant::now();
+        // The frame due at 200 ms came 3 ms late: the next is still due at 250 ms.
+        let pacer = fed(start, &[0, 50, 100, 150, 203]);
+        assert_eq!(pacer.period(), Some(50 * MS));
+        assert_eq!(pacer.first_poll_at(), Some(start + 245 * MS));
+        // The frame due at 200 ms never came.
+        let pacer = fed(start, &[0, 50, 100, 150, 250]);
+        assert_eq!(pacer.period(), Some(50 * MS));
+        assert_eq!(pacer.first_poll_at(), Some(start + 295 * MS));
+        // Only the last nine arrivals count: the late one has left.
+        let later: Vec<u64> = (5..=13).map(|n| 50 * n).collect();
+        let pacer = fed(start, &[[0, 50, 100, 150, 203].as_slice(), &later].concat());
+        assert_eq!(pacer.first_poll_at(), Some(start + 695 * MS));
+    }
+
+    #[test]
+    fn a_frame_there_at_the_first_poll_after_a_pause_makes_polling_start_over() {
+        let start = Instant::now();
+        let mut pacer = fed(start, &[0, 50, 100, 150]);
+        // The device's period shortened to 40 ms: the first poll, 45 ms after the last frame,
+        // finds the next one there already.
+        assert!(pacer.frame_arrived(start + 195 * MS, true));
+        assert_eq!((pacer.period(), pacer.pause()), (None, MS));
+        // Relearnt from polls every millisecond.
+        for ms in [235, 275, 315] {
+            assert!(!pacer.frame_arrived(start + Duration::from_millis(ms), false));
+        }
+        assert_eq!(pacer.period(), Some(40 * MS));
+        assert_eq!(pacer.first_poll_at(), Some(start + 350 * MS));
+    }
+
+    #[test]
+    fn without_a_pause_a_frame_at_every_poll_is_not_early() {
+        // A device faster than the poll interval: every first poll sees a new frame.
+        let mut pacer = PollPacer::new(5 * MS, 5 * MS);
+        let mut at = Instant::now();
+        for _ in 0..20 {
+            assert!(!pacer.frame_arrived(at, true));
+            at += 5 * MS;
+        }
+        assert_eq!(pacer.pause(), 5 * MS);
+    }
+
+    #[test]
+    fn a_lead_as_long_as_the_period_never_pauses() {
+        let mut pacer = PollPacer::new(MS, 60 * MS);
+        let start = Instant::now();
+        for n in 0..10_u32 {
+            assert!(!pacer.frame_arrived(start + n * 50 * MS, true));
+        }
+        assert_eq!(pacer.pause(), MS);
+    }
+}
