@@ -57,9 +57,9 @@ pub struct DriverConfig {
     pub baud_settle: Duration,
     /// Pause between BX polls while the frame number has not changed.
     pub poll_interval: Duration,
-    /// How long before the next frame is due (by the recent intervals between frames)
-    /// polling resumes after a frame; until then it pauses (see [`crate::pacing`]). A lead
-    /// as long as the frame period polls without pauses.
+    /// How long before the next frame is due (by the recent intervals between frames, less
+    /// the longest recent exchange) polling resumes after a frame; until then it pauses (see
+    /// [`crate::pacing`]). A lead as long as the frame period polls without pauses.
     pub poll_lead: Duration,
     /// [`NdiDriver::next_frame`] fails if no new frame number arrives within this.
     pub stall_timeout: Duration,
@@ -367,8 +367,9 @@ impl NdiDriver {
     }
 
     /// Polls until the frame number differs from the last one returned, waiting
-    /// `poll_interval` between polls. The first poll waits until `poll_lead` before the next
-    /// frame is due by the recent intervals between frames, at least `poll_interval` after
+    /// `poll_interval` between polls. The first poll waits until `poll_lead` plus the longest
+    /// recent exchange before the next frame is due by the recent intervals between frames,
+    /// at least `poll_interval` after
     /// the arrival of the last frame returned (see [`crate::pacing`]). A bad reply is
     /// returned as an error (and counted); the next call goes on polling. An unanswered poll
     /// is sent again up to [`DriverConfig::poll_retries`] times in a row (counted) before it
@@ -385,6 +386,7 @@ impl NdiDriver {
         let mut unanswered = 0;
         let mut answered = 0;
         loop {
+            let started = Instant::now();
             let stamped = match self.poll() {
                 Ok(stamped) => stamped,
                 Err(DriverError::Timeout { .. }) if unanswered < self.config.poll_retries => {
@@ -401,7 +403,11 @@ impl NdiDriver {
                 self.last_frame = frame;
                 self.last_frame_at = stamped.arrival;
                 self.stats.frames += 1;
-                if self.pacer.frame_arrived(stamped.arrival, answered == 1) {
+                let exchange = stamped.arrival.saturating_duration_since(started);
+                if self
+                    .pacer
+                    .frame_arrived(stamped.arrival, exchange, answered == 1)
+                {
                     self.stats.early_frames += 1;
                 }
                 return Ok(stamped);

@@ -12,9 +12,12 @@
 //! the frame period is the median interval between them (robust to a skipped frame and to a
 //! late one), and each remembered arrival, carried forward by whole periods, predicts the
 //! next; the earliest prediction counts, so one late frame does not make the next look
-//! early. After a frame, polling pauses until a lead time before that prediction; from then
-//! on the driver polls every poll interval until the frame is there, as without a pause. So
-//! the bracket of every frame is as narrow as before.
+//! early. After a frame, polling pauses until a lead time before that prediction, and before
+//! it by the longest recent exchange too (a poll sees a frame if it was *sent* after the frame
+//! became available, but arrivals come an exchange later: on a real serial line at 115 200
+//! baud a BX reply takes over 10 ms); from then on the driver polls every poll interval until
+//! the frame is there, as without a pause. So the bracket of every frame is as narrow as
+//! before.
 //!
 //! A frame that is there already at the first poll after a pause came sooner than predicted
 //! (the device's rate went up, or a frame was earlier than the lead allows for): its bracket
@@ -27,7 +30,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-/// New-frame arrivals remembered.
+/// New frames remembered.
 const ARRIVALS_REMEMBERED: usize = 9;
 /// Arrivals needed before polling pauses after a frame (three intervals).
 const ARRIVALS_NEEDED: usize = 4;
@@ -40,6 +43,8 @@ pub struct PollPacer {
     lead: Duration,
     /// Arrivals of the last new frames, newest last.
     arrivals: VecDeque<Instant>,
+    /// The exchanges of the polls that saw them: from starting the poll to its reply.
+    exchanges: VecDeque<Duration>,
 }
 
 impl PollPacer {
@@ -49,6 +54,7 @@ impl PollPacer {
             poll_interval,
             lead,
             arrivals: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
+            exchanges: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
         }
     }
 
@@ -71,8 +77,9 @@ impl PollPacer {
         Some(intervals[count / 2])
     }
 
-    /// How long after the last new frame polling resumes: `lead` before the next frame is
-    /// predicted, at least one poll interval (that alone until the period is known).
+    /// How long after the last new frame polling resumes: `lead` plus the longest exchange
+    /// remembered before the next frame is predicted, at least one poll interval (that alone
+    /// until the period is known).
     pub fn pause(&self) -> Duration {
         let (Some(period), Some(&last)) = (self.period(), self.arrivals.back()) else {
             return self.poll_interval;
@@ -90,9 +97,10 @@ impl PollPacer {
             })
             .min()
             .unwrap_or(last + period);
+        let exchange = self.exchanges.iter().max().copied().unwrap_or_default();
         predicted
             .saturating_duration_since(last)
-            .saturating_sub(self.lead)
+            .saturating_sub(self.lead + exchange)
             .max(self.poll_interval)
     }
 
@@ -102,19 +110,27 @@ impl PollPacer {
         self.arrivals.back().map(|&last| last + self.pause())
     }
 
-    /// A new frame arrived at `arrival`, seen by the first poll sent since the previous frame
-    /// if `at_first_poll`. Returns true if that poll followed a pause longer than the poll
-    /// interval: the frame came sooner than predicted, its bracket is the pause, and the
-    /// arrivals before it are forgotten.
-    pub fn frame_arrived(&mut self, arrival: Instant, at_first_poll: bool) -> bool {
+    /// A new frame arrived at `arrival`, `exchange` after the poll that saw it was started,
+    /// that poll being the first since the previous frame if `at_first_poll`. Returns true if
+    /// that poll followed a pause longer than the poll interval: the frame came sooner than
+    /// predicted, its bracket is the pause, and the frames before it are forgotten.
+    pub fn frame_arrived(
+        &mut self,
+        arrival: Instant,
+        exchange: Duration,
+        at_first_poll: bool,
+    ) -> bool {
         let early = at_first_poll && self.pause() > self.poll_interval;
         if early {
             self.arrivals.clear();
+            self.exchanges.clear();
         }
         if self.arrivals.len() == ARRIVALS_REMEMBERED {
             self.arrivals.pop_front();
+            self.exchanges.pop_front();
         }
         self.arrivals.push_back(arrival);
+        self.exchanges.push_back(exchange);
         early
     }
 }
@@ -124,6 +140,8 @@ mod tests {
     use super::*;
 
     const MS: Duration = Duration::from_millis(1);
+    /// Replies taken as instantaneous (on a pseudo-terminal they take tens of µs).
+    const NO_EXCHANGE: Duration = Duration::ZERO;
 
     /// A pacer (1 ms polls, 5 ms lead) fed new frames arriving at `arrivals_ms` after `start`,
     /// none of them early.
@@ -131,7 +149,7 @@ mod tests {
         let mut pacer = PollPacer::new(MS, 5 * MS);
         for &ms in arrivals_ms {
             assert!(
-                !pacer.frame_arrived(start + Duration::from_millis(ms), false),
+                !pacer.frame_arrived(start + Duration::from_millis(ms), NO_EXCHANGE, false),
                 "{ms} ms"
             );
         }
@@ -168,16 +186,29 @@ mod tests {
     }
 
     #[test]
+    fn polling_resumes_earlier_by_the_longest_recent_exchange() {
+        // A real serial line: a BX reply takes 13 ms, once 14 ms.
+        let mut pacer = PollPacer::new(MS, 5 * MS);
+        let start = Instant::now();
+        for (n, exchange_ms) in [13, 14, 13, 13].into_iter().enumerate() {
+            let arrival = start + 50 * MS * n as u32;
+            assert!(!pacer.frame_arrived(arrival, exchange_ms * MS, false));
+        }
+        assert_eq!(pacer.pause(), 31 * MS);
+        assert_eq!(pacer.first_poll_at(), Some(start + 181 * MS));
+    }
+
+    #[test]
     fn a_frame_there_at_the_first_poll_after_a_pause_makes_polling_start_over() {
         let start = Instant::now();
         let mut pacer = fed(start, &[0, 50, 100, 150]);
         // The device's period shortened to 40 ms: the first poll, 45 ms after the last frame,
         // finds the next one there already.
-        assert!(pacer.frame_arrived(start + 195 * MS, true));
+        assert!(pacer.frame_arrived(start + 195 * MS, NO_EXCHANGE, true));
         assert_eq!((pacer.period(), pacer.pause()), (None, MS));
         // Relearnt from polls every millisecond.
         for ms in [235, 275, 315] {
-            assert!(!pacer.frame_arrived(start + Duration::from_millis(ms), false));
+            assert!(!pacer.frame_arrived(start + Duration::from_millis(ms), NO_EXCHANGE, false));
         }
         assert_eq!(pacer.period(), Some(40 * MS));
         assert_eq!(pacer.first_poll_at(), Some(start + 350 * MS));
@@ -189,7 +220,7 @@ mod tests {
         let mut pacer = PollPacer::new(5 * MS, 5 * MS);
         let mut at = Instant::now();
         for _ in 0..20 {
-            assert!(!pacer.frame_arrived(at, true));
+            assert!(!pacer.frame_arrived(at, NO_EXCHANGE, true));
             at += 5 * MS;
         }
         assert_eq!(pacer.pause(), 5 * MS);
@@ -200,7 +231,7 @@ mod tests {
         let mut pacer = PollPacer::new(MS, 60 * MS);
         let start = Instant::now();
         for n in 0..10_u32 {
-            assert!(!pacer.frame_arrived(start + n * 50 * MS, true));
+            assert!(!pacer.frame_arrived(start + n * 50 * MS, NO_EXCHANGE, true));
         }
         assert_eq!(pacer.pause(), MS);
     }
