@@ -52,9 +52,9 @@ pub use deadline::Deadline;
 pub use domain::{Domain, DEFAULT_DOMAIN, DOMAIN_ENV, MAX_DOMAIN_LEN};
 pub use doorbell::Doorbell;
 pub use doorbell_rpc::{Answered, DoorbellClient, DoorbellServer, Pending};
-pub use files::domain_files;
+pub use files::{domain_files, release_domain};
 pub use message::Message;
-pub use observer::{release_domain, GraphObserver};
+pub use observer::GraphObserver;
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{
     run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime,

@@ -1,13 +1,11 @@
 //! Watching the nodes of a domain from outside the graph (the launcher, tests).
 
-use crate::files::domain_files;
 use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
 use crate::Doorbell;
 use crate::{Domain, NodeError, Transport};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::NodeBuilder;
 use sabr_msgs::{services, Lifecycle};
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// An iceoryx2 node that receives every node's lifecycle announcements of a domain and can
@@ -89,29 +87,4 @@ impl<S: Transport> GraphObserver<S> {
     pub fn node(&self) -> &Node<S> {
         &self.node
     }
-}
-
-/// Removes what iceoryx2 keeps of `domain` once no node of it exists (alive or dead): the
-/// per-domain node-counter segment `…global_mgmt`, which iceoryx2 never removes by itself.
-/// Returns the files of the domain still left, which should be none.
-///
-/// Only the owner of the domain (the launcher, after its graph stopped) may call this: a node
-/// starting at the same moment would lose its node counter.
-pub fn release_domain(domain: &Domain) -> Vec<PathBuf> {
-    let config = domain.iceoryx_config();
-    let mut nodes = 0usize;
-    let listed = Node::<Doorbell>::list(&config, |_| {
-        nodes += 1;
-        iceoryx2::prelude::CallbackProgression::Continue
-    });
-    if listed.is_ok() && nodes == 0 {
-        for file in domain_files(domain) {
-            if file.to_string_lossy().ends_with(".global_mgmt") {
-                if let Err(error) = std::fs::remove_file(&file) {
-                    tracing::warn!(file = %file.display(), %error, "cannot remove");
-                }
-            }
-        }
-    }
-    domain_files(domain)
 }

@@ -115,3 +115,17 @@ fn observer_sees_lifecycle_and_a_clean_exit_leaves_no_files() {
     assert!(left.is_empty(), "left behind: {left:?}");
     assert!(domain_files(&domain).is_empty());
 }
+
+#[test]
+fn a_domain_is_not_released_while_a_node_of_it_lives() {
+    let domain = unique_domain("live");
+    let rt = NodeRuntime::with_domain("alive", domain.clone()).unwrap();
+    let left = release_domain(&domain);
+    assert!(
+        left.iter()
+            .any(|file| file.to_string_lossy().ends_with(".global_mgmt")),
+        "the node counter went while a node lives: {left:?}"
+    );
+    drop(rt);
+    release(&domain);
+}

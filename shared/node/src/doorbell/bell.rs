@@ -380,7 +380,8 @@ impl Ringer {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{release_domain, Domain};
+    use crate::domain::Domain;
+    use crate::files::release_domain;
     use iceoryx2::prelude::NodeBuilder;
 
     #[test]
