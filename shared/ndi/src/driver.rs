@@ -369,8 +369,8 @@ impl NdiDriver {
     /// Polls until the frame number differs from the last one returned, waiting
     /// `poll_interval` between polls. The first poll waits until `poll_lead` plus the longest
     /// recent exchange before the next frame is due by the recent intervals between frames,
-    /// at least `poll_interval` after
-    /// the arrival of the last frame returned (see [`crate::pacing`]). A bad reply is
+    /// at least `poll_interval` after the arrival of the last frame returned (see
+    /// [`crate::pacing`]). A bad reply is
     /// returned as an error (and counted); the next call goes on polling. An unanswered poll
     /// is sent again up to [`DriverConfig::poll_retries`] times in a row (counted) before it
     /// is [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
@@ -378,10 +378,7 @@ impl NdiDriver {
     pub fn next_frame(&mut self) -> Result<Stamped, DriverError> {
         // Polling sooner would only find the frame returned last again, and would keep the
         // CPU and the port busy while the consumers of that frame wait to run.
-        let first_poll = self
-            .pacer
-            .first_poll_at()
-            .unwrap_or(self.last_frame_at + self.config.poll_interval);
+        let first_poll = self.last_frame_at + self.pacer.pause();
         std::thread::sleep(first_poll.saturating_duration_since(Instant::now()));
         let mut unanswered = 0;
         let mut answered = 0;

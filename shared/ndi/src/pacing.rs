@@ -41,10 +41,9 @@ const ARRIVALS_NEEDED: usize = 4;
 pub struct PollPacer {
     poll_interval: Duration,
     lead: Duration,
-    /// Arrivals of the last new frames, newest last.
-    arrivals: VecDeque<Instant>,
-    /// The exchanges of the polls that saw them: from starting the poll to its reply.
-    exchanges: VecDeque<Duration>,
+    /// The last new frames, newest last: each one's arrival, and the exchange of the poll that
+    /// saw it (from starting the poll to its reply).
+    frames: VecDeque<(Instant, Duration)>,
 }
 
 impl PollPacer {
@@ -53,22 +52,21 @@ impl PollPacer {
         PollPacer {
             poll_interval,
             lead,
-            arrivals: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
-            exchanges: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
+            frames: VecDeque::with_capacity(ARRIVALS_REMEMBERED),
         }
     }
 
     /// The frame period: the median interval between the remembered arrivals (`None` with
     /// fewer than [`ARRIVALS_NEEDED`]).
     pub fn period(&self) -> Option<Duration> {
-        if self.arrivals.len() < ARRIVALS_NEEDED {
+        if self.frames.len() < ARRIVALS_NEEDED {
             return None;
         }
         let mut intervals = [Duration::ZERO; ARRIVALS_REMEMBERED - 1];
-        let count = self.arrivals.len() - 1;
-        for (interval, (earlier, later)) in intervals
+        let count = self.frames.len() - 1;
+        for (interval, ((earlier, _), (later, _))) in intervals
             .iter_mut()
-            .zip(self.arrivals.iter().zip(self.arrivals.iter().skip(1)))
+            .zip(self.frames.iter().zip(self.frames.iter().skip(1)))
         {
             *interval = later.saturating_duration_since(*earlier);
         }
@@ -79,35 +77,29 @@ impl PollPacer {
 
     /// How long after the last new frame polling resumes: `lead` plus the longest exchange
     /// remembered before the next frame is predicted, at least one poll interval (that alone
-    /// until the period is known).
+    /// before the first frame and until the period is known).
     pub fn pause(&self) -> Duration {
-        let (Some(period), Some(&last)) = (self.period(), self.arrivals.back()) else {
+        let (Some(period), Some(&(last, _))) = (self.period(), self.frames.back()) else {
             return self.poll_interval;
         };
         if period.is_zero() {
             return self.poll_interval;
         }
         let predicted = self
-            .arrivals
+            .frames
             .iter()
-            .map(|&arrival| {
+            .map(|&(arrival, _)| {
                 let since = last.saturating_duration_since(arrival);
                 let periods = (since.as_secs_f64() / period.as_secs_f64()).round() as u32 + 1;
                 arrival + period * periods
             })
             .min()
             .unwrap_or(last + period);
-        let exchange = self.exchanges.iter().max().copied().unwrap_or_default();
+        let exchange = self.frames.iter().map(|&(_, exchange)| exchange).max();
         predicted
             .saturating_duration_since(last)
-            .saturating_sub(self.lead + exchange)
+            .saturating_sub(self.lead + exchange.unwrap_or_default())
             .max(self.poll_interval)
-    }
-
-    /// When to send the first poll for the next frame (`None` before the first frame: at
-    /// once).
-    pub fn first_poll_at(&self) -> Option<Instant> {
-        self.arrivals.back().map(|&last| last + self.pause())
     }
 
     /// A new frame arrived at `arrival`, `exchange` after the poll that saw it was started,
@@ -122,15 +114,12 @@ impl PollPacer {
     ) -> bool {
         let early = at_first_poll && self.pause() > self.poll_interval;
         if early {
-            self.arrivals.clear();
-            self.exchanges.clear();
+            self.frames.clear();
         }
-        if self.arrivals.len() == ARRIVALS_REMEMBERED {
-            self.arrivals.pop_front();
-            self.exchanges.pop_front();
+        if self.frames.len() == ARRIVALS_REMEMBERED {
+            self.frames.pop_front();
         }
-        self.arrivals.push_back(arrival);
-        self.exchanges.push_back(exchange);
+        self.frames.push_back((arrival, exchange));
         early
     }
 }
@@ -159,13 +148,11 @@ mod tests {
     #[test]
     fn polling_pauses_until_the_lead_before_the_next_frame_once_three_intervals_are_known() {
         let start = Instant::now();
-        assert_eq!(PollPacer::new(MS, 5 * MS).first_poll_at(), None);
+        assert_eq!(PollPacer::new(MS, 5 * MS).pause(), MS);
         let pacer = fed(start, &[0, 50, 100]);
         assert_eq!((pacer.period(), pacer.pause()), (None, MS));
-        assert_eq!(pacer.first_poll_at(), Some(start + 101 * MS));
         let pacer = fed(start, &[0, 50, 100, 150]);
         assert_eq!((pacer.period(), pacer.pause()), (Some(50 * MS), 45 * MS));
-        assert_eq!(pacer.first_poll_at(), Some(start + 195 * MS));
     }
 
     #[test]
@@ -174,15 +161,15 @@ mod tests {
         // The frame due at 200 ms came 3 ms late: the next is still due at 250 ms.
         let pacer = fed(start, &[0, 50, 100, 150, 203]);
         assert_eq!(pacer.period(), Some(50 * MS));
-        assert_eq!(pacer.first_poll_at(), Some(start + 245 * MS));
+        assert_eq!(pacer.pause(), 42 * MS, "first poll at 245 ms");
         // The frame due at 200 ms never came.
         let pacer = fed(start, &[0, 50, 100, 150, 250]);
         assert_eq!(pacer.period(), Some(50 * MS));
-        assert_eq!(pacer.first_poll_at(), Some(start + 295 * MS));
+        assert_eq!(pacer.pause(), 45 * MS, "first poll at 295 ms");
         // Only the last nine arrivals count: the late one has left.
         let later: Vec<u64> = (5..=13).map(|n| 50 * n).collect();
         let pacer = fed(start, &[[0, 50, 100, 150, 203].as_slice(), &later].concat());
-        assert_eq!(pacer.first_poll_at(), Some(start + 695 * MS));
+        assert_eq!(pacer.pause(), 45 * MS, "first poll at 695 ms");
     }
 
     #[test]
@@ -194,8 +181,7 @@ mod tests {
             let arrival = start + 50 * MS * n as u32;
             assert!(!pacer.frame_arrived(arrival, exchange_ms * MS, false));
         }
-        assert_eq!(pacer.pause(), 31 * MS);
-        assert_eq!(pacer.first_poll_at(), Some(start + 181 * MS));
+        assert_eq!(pacer.pause(), 31 * MS, "first poll at 181 ms");
     }
 
     #[test]
@@ -211,7 +197,7 @@ mod tests {
             assert!(!pacer.frame_arrived(start + Duration::from_millis(ms), NO_EXCHANGE, false));
         }
         assert_eq!(pacer.period(), Some(40 * MS));
-        assert_eq!(pacer.first_poll_at(), Some(start + 350 * MS));
+        assert_eq!(pacer.pause(), 35 * MS, "first poll at 350 ms");
     }
 
     #[test]
