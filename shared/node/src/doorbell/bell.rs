@@ -260,13 +260,15 @@ impl Ringer {
         let now = Instant::now();
         let mut consumers = self.consumers.borrow_mut();
         let unknown = only.is_some_and(|port| consumers.iter().all(|(c, _)| c.port != port));
-        let last_read = self.last_read.get();
-        if unknown || last_read.is_none_or(|last| last.listed != listed) {
-            self.read(&mut consumers, listed, now, list);
-            return Ok(self.notify(&consumers, only, &[])?.0);
-        }
+        let last_read = match self.last_read.get() {
+            Some(last) if !unknown && last.listed == listed => last,
+            _ => {
+                self.read(&mut consumers, listed, now, list);
+                return Ok(self.notify(&consumers, only, &[])?.0);
+            }
+        };
         let (rung, unheard) = self.notify(&consumers, only, &[])?;
-        let stale = last_read.is_some_and(|last| now.duration_since(last.at) >= CONSUMERS_REFRESH);
+        let stale = now.duration_since(last_read.at) >= CONSUMERS_REFRESH;
         if !(stale || unheard) {
             return Ok(rung);
         }
