@@ -35,8 +35,13 @@ pub fn serve(
     // An announcement made before the server started (kept as history) applies now.
     apply_announcements(&announcements, solver)?;
     let mut counts = ServeCounts::default();
-    let exit = rt.run_on_data(&[&server, &announcements], POLL_PERIOD, |_ctx| {
-        apply_announcements(&announcements, solver)?;
+    let exit = rt.run_on_data(&[&server, &announcements], POLL_PERIOD, |ctx| {
+        if ctx.woken_by(&announcements) {
+            apply_announcements(&announcements, solver)?;
+        }
+        if !ctx.woken_by(&server) {
+            return Ok(());
+        }
         let answered = server.answer(|request| {
             let response = solver.solve(request);
             if response.status == IkStatus::Ok {

@@ -37,10 +37,11 @@ pub trait Waitable<S: Transport = Doorbell> {
     #[doc(hidden)]
     #[allow(private_interfaces)]
     fn wake_listener(&self) -> &S::Inbox;
-    /// Clears pending wake-ups after a wake (the data stays readable).
+    /// Takes the pending wake-ups after a wake (the data stays readable); true if there
+    /// were any.
     #[doc(hidden)]
-    fn clear(&self) {
-        S::clear_inbox(self.wake_listener());
+    fn take_ring(&self) -> bool {
+        S::take_inbox(self.wake_listener())
     }
 }
 
@@ -93,8 +94,8 @@ pub(crate) mod sealed {
         /// Sleeps up to `timeout` for the inbox to be woken; `Err` on a signal.
         fn wait_inbox(inbox: &Self::Inbox, timeout: Duration) -> Result<(), ()>;
 
-        /// Forgets pending wake-ups of the inbox.
-        fn clear_inbox(inbox: &Self::Inbox);
+        /// Forgets pending wake-ups of the inbox; true if there were any.
+        fn take_inbox(inbox: &Self::Inbox) -> bool;
 
         /// Calls `run` with a function that waits up to a timeout for any of `inputs`.
         fn with_waiter<R>(
@@ -142,9 +143,12 @@ impl sealed::Sealed for ipc::Service {
         inbox.timed_wait(|_| {}, timeout).map(drop).map_err(drop)
     }
 
-    fn clear_inbox(inbox: &Self::Inbox) {
-        // A failed wake-up drain only costs one spurious wake-up later.
-        let _ = inbox.try_wait(|_| {});
+    fn take_inbox(inbox: &Self::Inbox) -> bool {
+        let mut rang = false;
+        // A failed drain counts as a ring (the input is read) and costs one spurious wake-up
+        // later.
+        let drained = inbox.try_wait(|_| rang = true);
+        rang || drained.is_err()
     }
 
     fn with_waiter<R>(
@@ -230,8 +234,8 @@ impl sealed::Sealed for Doorbell {
         inbox.wait(timeout).map(drop).map_err(drop)
     }
 
-    fn clear_inbox(inbox: &Inbox) {
-        inbox.take();
+    fn take_inbox(inbox: &Inbox) -> bool {
+        inbox.take()
     }
 
     fn with_waiter<R>(

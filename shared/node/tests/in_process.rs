@@ -129,3 +129,62 @@ fn a_domain_is_not_released_while_a_node_of_it_lives() {
     drop(rt);
     release(&domain);
 }
+
+/// A loop with two inputs, on transport `S`: a call woken by one input's sample reports that
+/// input as rung and the other not; an idle call reports both (the body then looks at all).
+fn run_on_data_tells_which_inputs_rang<S: sabr_node::Transport>(test: &str) {
+    let domain = unique_domain(test);
+    {
+        let mut rt = NodeRuntime::<S>::in_domain("consumer", domain.clone()).unwrap();
+        let to_a = rt.publisher::<EncoderSample>("sabr/test/a").unwrap();
+        let to_b = rt.publisher::<EncoderSample>("sabr/test/b").unwrap();
+        let from_a = rt.subscriber::<EncoderSample>("sabr/test/a").unwrap();
+        let from_b = rt.subscriber::<EncoderSample>("sabr/test/b").unwrap();
+        let sample = |seq| EncoderSample {
+            seq,
+            ..Default::default()
+        };
+        // (tick, woke on data, a rang, b rang)
+        let mut calls = Vec::new();
+        rt.run_on_data(&[&from_a, &from_b], Duration::from_millis(20), |ctx| {
+            let (a, b) = (ctx.woken_by(&from_a), ctx.woken_by(&from_b));
+            calls.push((ctx.tick(), ctx.woke_on_data(), a, b));
+            // Read only what rang (and everything on the idle call), as a node does.
+            if a {
+                from_a.drain(|_| {})?;
+            }
+            if b {
+                from_b.drain(|_| {})?;
+            }
+            match ctx.tick() {
+                0 => to_a.send(sample(1))?,
+                1 => to_b.send(sample(2))?,
+                _ => ctx.stop(),
+            }
+            Ok::<_, sabr_node::NodeError>(())
+        })
+        .unwrap();
+        assert_eq!(
+            calls,
+            [
+                (0, false, true, true),
+                (1, true, true, false),
+                (2, true, false, true)
+            ]
+        );
+        // Nothing was left unread.
+        assert_eq!(from_a.try_recv().unwrap(), None);
+        assert_eq!(from_b.try_recv().unwrap(), None);
+    }
+    release(&domain);
+}
+
+#[test]
+fn run_on_data_tells_which_inputs_rang_on_the_doorbell() {
+    run_on_data_tells_which_inputs_rang::<sabr_node::Doorbell>("rang-doorbell");
+}
+
+#[test]
+fn run_on_data_tells_which_inputs_rang_on_iceoryx2_events() {
+    run_on_data_tells_which_inputs_rang::<sabr_node::iceoryx2::prelude::ipc::Service>("rang-ipc");
+}
