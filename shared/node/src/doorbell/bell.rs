@@ -198,6 +198,27 @@ struct Consumer {
     port: u128,
 }
 
+/// The highest real-time priority (`SCHED_FIFO`/`SCHED_RR`, 1–99; 0 at the normal policy)
+/// among the threads of the process that owns `node`, from `/proc/<pid>/task/*/stat` (the
+/// thread that waits on the doorbell may be the only one placed, as the bench's is); `None`
+/// if none can be read (the process ended, or the id names no process of this host).
+fn realtime_priority(node: &UniqueNodeId) -> Option<u8> {
+    let pid = node.pid::<Doorbell>().ok()?;
+    let tasks = std::fs::read_dir(format!("/proc/{}/task", pid.value())).ok()?;
+    tasks
+        .filter_map(|task| std::fs::read_to_string(task.ok()?.path().join("stat")).ok())
+        .filter_map(|stat| rt_priority_of_stat(&stat))
+        .max()
+}
+
+/// Field 40 (`rt_priority`) of a `/proc/<pid>/stat` line. The fields are counted after the
+/// command name, which is in parentheses and may itself hold spaces and parentheses.
+fn rt_priority_of_stat(stat: &str) -> Option<u8> {
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    // `after_name` starts with field 3 (the state).
+    after_name.split_whitespace().nth(40 - 3)?.parse().ok()
+}
+
 /// When the consumer ports were last read, and how many the service listed then.
 #[derive(Debug, Clone, Copy)]
 struct LastRead {
@@ -218,7 +239,9 @@ struct LastRead {
 /// are rung from the next read on, ports that went away (iceoryx2 removes dead nodes' ports)
 /// are not rung after it, and a port whose doorbell could not be opened yet is tried again on
 /// the next ring; a notifier per consumer node is opened when its first port appears and
-/// closed when its last one goes.
+/// closed when its last one goes. The ports are rung in descending real-time priority of
+/// their processes (their highest thread's), read from `/proc` when the ports change
+/// ([`in_ringing_order`]).
 pub struct Ringer {
     node: Rc<Node<Doorbell>>,
     service: String,
@@ -320,11 +343,11 @@ impl Ringer {
                 current.push(Consumer { node, id, port });
             }
         });
+        // (`consumers` is in ringing order, `current` in the dynamic config's.)
         let unchanged = consumers.len() == current.len()
-            && consumers
+            && current
                 .iter()
-                .zip(current.iter())
-                .all(|((c, _), n)| c == n);
+                .all(|n| consumers.iter().any(|(c, _)| c == n));
         let replaced = (!unchanged).then(|| {
             let connected = self.connect(consumers, &current);
             std::mem::replace(consumers, connected)
@@ -335,8 +358,9 @@ impl Ringer {
         replaced
     }
 
-    /// Notifiers for `current`, reusing those of `previous` by node; a consumer whose
-    /// doorbell cannot be opened (yet) is left out and tried again on the next ring.
+    /// Notifiers for `current`, reusing those of `previous` by node, in ringing order; a
+    /// consumer whose doorbell cannot be opened (yet) is left out and tried again on the next
+    /// ring.
     fn connect(
         &self,
         previous: &[(Consumer, Rc<Notifier<Doorbell>>)],
@@ -362,6 +386,8 @@ impl Ringer {
             };
             connected.push((*consumer, notifier));
         }
+        // A consumer whose priority cannot be read is rung as one at the normal policy.
+        in_ringing_order(&mut connected, |node| realtime_priority(node).unwrap_or(0));
         connected
     }
 
@@ -379,6 +405,37 @@ impl Ringer {
     }
 }
 
+/// Sorts `consumers` into ringing order: the highest real-time priority of their nodes first
+/// (`priority_of`, asked once per node, and not at all when there is only one), ties in the
+/// order given. On one core, a ring makes a consumer above the producer run at once, before
+/// the producer rings the next one: so the consumer that must run first is rung first,
+/// whichever subscribed first (a restarted node's ports are listed last).
+fn in_ringing_order<T>(
+    consumers: &mut [(Consumer, T)],
+    mut priority_of: impl FnMut(&UniqueNodeId) -> u8,
+) {
+    let Some((first, _)) = consumers.first() else {
+        return;
+    };
+    if consumers.iter().all(|(c, _)| c.node == first.node) {
+        // One node: nothing to order, nothing to look up.
+        return;
+    }
+    let mut priorities: Vec<(UniqueNodeId, u8)> = Vec::new();
+    for (consumer, _) in consumers.iter() {
+        if priorities.iter().all(|(node, _)| *node != consumer.node) {
+            priorities.push((consumer.node, priority_of(&consumer.node)));
+        }
+    }
+    let priority = |consumer: &Consumer| {
+        priorities
+            .iter()
+            .find(|(node, _)| *node == consumer.node)
+            .map_or(0, |(_, priority)| *priority)
+    };
+    consumers.sort_by_key(|(consumer, _)| std::cmp::Reverse(priority(consumer)));
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -394,6 +451,79 @@ mod tests {
         for other in ["doorbell-0", "doorbell-16", "doorbell-x", "publisher", ""] {
             assert_eq!(event_id_of(&name(other)), None, "{other:?}");
         }
+    }
+
+    #[test]
+    fn the_rt_priority_is_read_after_the_command_name() {
+        // Fields 3 to 39, then rt_priority (42) and the policy (1, SCHED_FIFO); the command
+        // name holds a space and a parenthesis.
+        let tail: Vec<String> = (3..40).map(|field| field.to_string()).collect();
+        let stat = format!("4242 (sabr (sync) x) {} 42 1 0 0", tail.join(" "));
+        assert_eq!(rt_priority_of_stat(&stat), Some(42));
+        assert_eq!(rt_priority_of_stat("4242 (sabr-sync) S 1 2"), None);
+        assert_eq!(rt_priority_of_stat("no name"), None);
+    }
+
+    #[test]
+    fn consumers_are_rung_by_descending_priority_of_their_nodes_ties_as_listed() {
+        let domain = Domain::new(&format!("d-ring-priority-{}", std::process::id())).unwrap();
+        {
+            let nodes: Vec<Node<Doorbell>> = (0..3)
+                .map(|_| {
+                    NodeBuilder::new()
+                        .config(&domain.iceoryx_config())
+                        .create::<Doorbell>()
+                        .unwrap()
+                })
+                .collect();
+            let (normal, sync, probe) = (*nodes[0].id(), *nodes[1].id(), *nodes[2].id());
+            let port = |node, port| {
+                (
+                    Consumer {
+                        node,
+                        id: EventId::new(1),
+                        port,
+                    },
+                    (),
+                )
+            };
+            // As the dynamic config lists them: the normal-policy node subscribed first.
+            let mut consumers = [
+                port(normal, 1),
+                port(sync, 2),
+                port(probe, 3),
+                port(sync, 4),
+            ];
+            let mut asked = Vec::new();
+            in_ringing_order(&mut consumers, |node| {
+                asked.push(*node);
+                match node {
+                    n if *n == sync => 42,
+                    n if *n == probe => 50,
+                    _ => 0,
+                }
+            });
+            let order: Vec<u128> = consumers.iter().map(|(c, _)| c.port).collect();
+            assert_eq!(order, [3, 2, 4, 1]);
+            assert_eq!(asked, [normal, sync, probe], "one look per node");
+            // The ports of one node are not looked up.
+            let mut one_node = [port(sync, 2), port(sync, 4)];
+            in_ringing_order(&mut one_node, |_| panic!("looked up"));
+            assert_eq!(one_node.map(|(c, _)| c.port), [2, 4]);
+
+            // A node of this process: its priority is the highest of this process's threads
+            // (this test's thread among them).
+            let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap();
+            let this_thread = rt_priority_of_stat(&stat);
+            assert!(this_thread.is_some(), "{stat}");
+            let found = realtime_priority(&normal);
+            assert!(
+                found.is_some() && found >= this_thread,
+                "{found:?} < {this_thread:?}"
+            );
+        }
+        let left = release_domain(&domain);
+        assert!(left.is_empty(), "left behind: {left:?}");
     }
 
     #[test]

@@ -12,11 +12,13 @@
 //!   the service's dynamic config;
 //! - a producer (publisher, client sending a request, server sending a response) rings, after
 //!   each send, the doorbell of every consumer port's node with that port's event id
-//!   ([`Ringer`]): the consumer ports come from the service's dynamic config (node id and
-//!   port name; read again before the ring when their number changes, and after it every
-//!   20 ms), the doorbells from the node ids. A consumer that restarts is a new node with
-//!   a new doorbell; a dead one disappears from the dynamic config when iceoryx2 cleans up
-//!   after it, and its doorbell with it;
+//!   ([`Ringer`]), highest real-time priority of the consumer's process first (on one core
+//!   the first consumer rung above the producer runs before the next is rung): the consumer
+//!   ports come from the service's dynamic config (node id and port name; read again before
+//!   the ring when their number changes, and after it every 20 ms), the doorbells from the
+//!   node ids. A consumer that restarts is a new node with a new doorbell; a dead one
+//!   disappears from the dynamic config when iceoryx2 cleans up after it, and its doorbell
+//!   with it;
 //! - the consumer sleeps on its doorbell with a relative timeout (deadlines and heartbeats
 //!   keep working) and drains the ports whose ids rang.
 //!
