@@ -219,6 +219,27 @@ fn rt_priority_of_stat(stat: &str) -> Option<u8> {
     after_name.split_whitespace().nth(40 - 3)?.parse().ok()
 }
 
+/// The doorbell of one consumer node as a producer rings it: its notifier, and the node's
+/// real-time priority, read from `/proc` the first time the ringing order needs it and kept
+/// for as long as the notifier (a node's placement is set before it starts).
+struct ConsumerBell {
+    notifier: Notifier<Doorbell>,
+    priority: Cell<Option<u8>>,
+}
+
+impl ConsumerBell {
+    /// The real-time priority of `node`, this bell's node (0 if it cannot be read: rung as
+    /// one at the normal policy).
+    fn priority(&self, node: &UniqueNodeId) -> u8 {
+        if let Some(priority) = self.priority.get() {
+            return priority;
+        }
+        let priority = realtime_priority(node).unwrap_or(0);
+        self.priority.set(Some(priority));
+        priority
+    }
+}
+
 /// When the consumer ports were last read, and how many the service listed then.
 #[derive(Debug, Clone, Copy)]
 struct LastRead {
@@ -240,13 +261,13 @@ struct LastRead {
 /// are not rung after it, and a port whose doorbell could not be opened yet is tried again on
 /// the next ring; a notifier per consumer node is opened when its first port appears and
 /// closed when its last one goes. The ports are rung in descending real-time priority of
-/// their processes (their highest thread's), read from `/proc` when the ports change
+/// their processes (their highest thread's), read from `/proc` once per consumer node
 /// ([`in_ringing_order`]).
 pub struct Ringer {
     node: Rc<Node<Doorbell>>,
     service: String,
-    /// The consumers read last, and the notifier of each one's node.
-    consumers: RefCell<Vec<(Consumer, Rc<Notifier<Doorbell>>)>>,
+    /// The consumers read last, in ringing order, and the doorbell of each one's node.
+    consumers: RefCell<Vec<(Consumer, Rc<ConsumerBell>)>>,
     /// Scratch list of the consumers now in the dynamic config.
     current: RefCell<Vec<Consumer>>,
     /// `None` until the first read, and after a read that left a consumer out.
@@ -308,16 +329,17 @@ impl Ringer {
     /// `rung_already`; returns how many and whether any doorbell rung had no listener.
     fn notify(
         &self,
-        consumers: &[(Consumer, Rc<Notifier<Doorbell>>)],
+        consumers: &[(Consumer, Rc<ConsumerBell>)],
         only: Option<u128>,
-        rung_already: &[(Consumer, Rc<Notifier<Doorbell>>)],
+        rung_already: &[(Consumer, Rc<ConsumerBell>)],
     ) -> Result<(usize, bool), NodeError> {
         let mut rung = 0;
         let mut unheard = false;
-        for (consumer, notifier) in consumers.iter().filter(|(c, _)| {
+        for (consumer, bell) in consumers.iter().filter(|(c, _)| {
             only.is_none_or(|port| c.port == port) && rung_already.iter().all(|(r, _)| r != c)
         }) {
-            let listeners = notifier
+            let listeners = bell
+                .notifier
                 .notify_with_custom_event_id(consumer.id)
                 .map_err(|e| NodeError::port(&self.service, "ring a doorbell", e))?;
             unheard |= listeners == 0;
@@ -331,11 +353,11 @@ impl Ringer {
     /// Returns the list it replaced if the ports changed.
     fn read(
         &self,
-        consumers: &mut Vec<(Consumer, Rc<Notifier<Doorbell>>)>,
+        consumers: &mut Vec<(Consumer, Rc<ConsumerBell>)>,
         listed: usize,
         now: Instant,
         list: impl FnOnce(&mut dyn FnMut(UniqueNodeId, &PortName, u128)),
-    ) -> Option<Vec<(Consumer, Rc<Notifier<Doorbell>>)>> {
+    ) -> Option<Vec<(Consumer, Rc<ConsumerBell>)>> {
         let mut current = self.current.borrow_mut();
         current.clear();
         list(&mut |node, port_name, port| {
@@ -363,31 +385,35 @@ impl Ringer {
     /// ring.
     fn connect(
         &self,
-        previous: &[(Consumer, Rc<Notifier<Doorbell>>)],
+        previous: &[(Consumer, Rc<ConsumerBell>)],
         current: &[Consumer],
-    ) -> Vec<(Consumer, Rc<Notifier<Doorbell>>)> {
-        let mut connected: Vec<(Consumer, Rc<Notifier<Doorbell>>)> =
-            Vec::with_capacity(current.len());
+    ) -> Vec<(Consumer, Rc<ConsumerBell>)> {
+        let mut connected: Vec<(Consumer, Rc<ConsumerBell>)> = Vec::with_capacity(current.len());
         for consumer in current {
             let known = connected
                 .iter()
                 .chain(previous.iter())
                 .find(|(c, _)| c.node == consumer.node)
-                .map(|(_, notifier)| Rc::clone(notifier));
-            let notifier = match known {
-                Some(notifier) => notifier,
+                .map(|(_, bell)| Rc::clone(bell));
+            let bell = match known {
+                Some(bell) => bell,
                 None => match self.open(&consumer.node) {
-                    Ok(notifier) => Rc::new(notifier),
+                    Ok(notifier) => Rc::new(ConsumerBell {
+                        notifier,
+                        priority: Cell::new(None),
+                    }),
                     Err(error) => {
                         tracing::debug!(%error, service = %self.service, "doorbell not reachable yet");
                         continue;
                     }
                 },
             };
-            connected.push((*consumer, notifier));
+            connected.push((*consumer, bell));
         }
-        // A consumer whose priority cannot be read is rung as one at the normal policy.
-        in_ringing_order(&mut connected, |node| realtime_priority(node).unwrap_or(0));
+        // A node's priority is read once, the first time its bell is ordered among others.
+        in_ringing_order(&mut connected, |(consumer, bell)| {
+            bell.priority(&consumer.node)
+        });
         connected
     }
 
@@ -406,13 +432,13 @@ impl Ringer {
 }
 
 /// Sorts `consumers` into ringing order: the highest real-time priority of their nodes first
-/// (`priority_of`, asked once per node, and not at all when there is only one), ties in the
-/// order given. On one core, a ring makes a consumer above the producer run at once, before
-/// the producer rings the next one: so the consumer that must run first is rung first,
-/// whichever subscribed first (a restarted node's ports are listed last).
+/// (`priority_of`, asked for one entry of each node, and not at all when there is only one
+/// node), ties in the order given. On one core, a ring makes a consumer above the producer
+/// run at once, before the producer rings the next one: so the consumer that must run first
+/// is rung first, whichever subscribed first (a restarted node's ports are listed last).
 fn in_ringing_order<T>(
     consumers: &mut [(Consumer, T)],
-    mut priority_of: impl FnMut(&UniqueNodeId) -> u8,
+    mut priority_of: impl FnMut(&(Consumer, T)) -> u8,
 ) {
     let Some((first, _)) = consumers.first() else {
         return;
@@ -422,9 +448,9 @@ fn in_ringing_order<T>(
         return;
     }
     let mut priorities: Vec<(UniqueNodeId, u8)> = Vec::new();
-    for (consumer, _) in consumers.iter() {
-        if priorities.iter().all(|(node, _)| *node != consumer.node) {
-            priorities.push((consumer.node, priority_of(&consumer.node)));
+    for entry in consumers.iter() {
+        if priorities.iter().all(|(node, _)| *node != entry.0.node) {
+            priorities.push((entry.0.node, priority_of(entry)));
         }
     }
     let priority = |consumer: &Consumer| {
@@ -495,11 +521,11 @@ mod tests {
                 port(sync, 4),
             ];
             let mut asked = Vec::new();
-            in_ringing_order(&mut consumers, |node| {
-                asked.push(*node);
-                match node {
-                    n if *n == sync => 42,
-                    n if *n == probe => 50,
+            in_ringing_order(&mut consumers, |(consumer, _)| {
+                asked.push(consumer.node);
+                match consumer.node {
+                    n if n == sync => 42,
+                    n if n == probe => 50,
                     _ => 0,
                 }
             });
