@@ -6,11 +6,23 @@ use crate::transport::{Transport, Waitable};
 use crate::Doorbell;
 use crate::NodeError;
 use iceoryx2::prelude::PortFactory;
+use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use iceoryx2::service::port_factory::publish_subscribe;
+use std::cell::RefCell;
+use std::mem::MaybeUninit;
 use std::time::{Duration, Instant};
 
 /// Publishes `T` on a service and wakes every [`Subscriber`] of it that is waiting.
+///
+/// It keeps the sample for its next message loaned in advance. A loan reclaims the samples
+/// every subscriber has released and takes one from the shared pool: in the live graph on
+/// the development VM it took p50 0.7 µs for an encoder sample at 1 kHz and 7.4 µs for a
+/// tracker frame at 20 Hz, whose memory has gone cold by the next frame. Loaned after the
+/// subscribers were rung, it is off the path to every subscriber that runs when rung (one
+/// above the publisher on its core, or on another core).
 pub struct Publisher<T: Message, S: Transport = Doorbell> {
+    /// The sample the next [`Publisher::send`] fills, if the last loan succeeded.
+    loaned: RefCell<Option<SampleMutUninit<S, MaybeUninit<T>, ()>>>,
     port: iceoryx2::port::publisher::Publisher<S, T, ()>,
     wake: S::Wake,
     factory: publish_subscribe::PortFactory<S, T, ()>,
@@ -24,7 +36,9 @@ impl<T: Message, S: Transport> Publisher<T, S> {
         factory: publish_subscribe::PortFactory<S, T, ()>,
         service: &str,
     ) -> Self {
+        let loaned = RefCell::new(port.loan_uninit().ok());
         Self {
+            loaned,
             port,
             wake,
             factory,
@@ -32,12 +46,23 @@ impl<T: Message, S: Transport> Publisher<T, S> {
         }
     }
 
-    /// Sends one sample to all subscribers and wakes them.
+    /// Sends one sample to all subscribers and wakes them, then loans the sample for the next
+    /// message. A failed loan in advance is retried by the next call, which reports it.
     pub fn send(&self, value: T) -> Result<(), NodeError> {
-        self.port
-            .send_copy(value)
+        let sample = match self.loaned.take() {
+            Some(sample) => sample,
+            None => self
+                .port
+                .loan_uninit()
+                .map_err(|e| NodeError::port(&self.service, "loan", e))?,
+        };
+        sample
+            .write_payload(value)
+            .send()
             .map_err(|e| NodeError::port(&self.service, "send", e))?;
-        S::wake_subscribers(&self.wake, &self.factory, &self.service)
+        let woken = S::wake_subscribers(&self.wake, &self.factory, &self.service);
+        self.loaned.replace(self.port.loan_uninit().ok());
+        woken
     }
 
     /// The service name.

@@ -41,6 +41,46 @@ fn samples_flow_and_a_silent_publisher_times_out() {
     release(&domain);
 }
 
+/// The publisher keeps one sample loaned for its next message: every send must use that loan
+/// and not take another, or the pool iceoryx2 sizes for the loans it grants would run dry.
+#[test]
+fn a_publisher_loaning_ahead_never_runs_out_of_samples() {
+    let domain = unique_domain("loan-ahead");
+    let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
+    let publisher = rt
+        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let slow = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let keeping_up = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let sample = |seq| EncoderSample {
+        seq,
+        t_ns: 0,
+        counts: [0; 5],
+    };
+    const SENDS: u64 = 1_000;
+    for seq in 0..SENDS {
+        publisher
+            .send(sample(seq))
+            .unwrap_or_else(|e| panic!("send {seq}: {e}"));
+        assert_eq!(keeping_up.try_recv().unwrap(), Some(sample(seq)));
+    }
+    // The slow subscriber read nothing: its buffer overflowed, keeping the newest samples.
+    let mut kept = Vec::new();
+    slow.drain(|received| kept.push(received.seq)).unwrap();
+    assert!(!kept.is_empty());
+    assert_eq!(kept.last(), Some(&(SENDS - 1)));
+    assert!(
+        kept.windows(2).all(|pair| pair[1] == pair[0] + 1),
+        "{kept:?}"
+    );
+    drop((publisher, slow, keeping_up, rt));
+    release(&domain);
+}
+
 #[test]
 fn run_on_data_wakes_on_samples_and_idles_without() {
     let domain = unique_domain("wake");
