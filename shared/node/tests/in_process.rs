@@ -41,8 +41,9 @@ fn samples_flow_and_a_silent_publisher_times_out() {
     release(&domain);
 }
 
-/// The publisher keeps one sample loaned for its next message: every send must use that loan
-/// and not take another, or the pool iceoryx2 sizes for the loans it grants would run dry.
+/// The publisher keeps one sample loaned for its next message: a send must use or give back
+/// every loan it holds. A lost loan would exhaust the loans iceoryx2 grants (a send fails) and
+/// keep the service's shared memory alive after the ports are gone (`release` finds it).
 #[test]
 fn a_publisher_loaning_ahead_never_runs_out_of_samples() {
     let domain = unique_domain("loan-ahead");
