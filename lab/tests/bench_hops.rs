@@ -87,6 +87,8 @@ fn quick_hops_measure_the_live_graphs() {
         [
             "hop/encoder-sample-to-subscriber",
             "hop/ik-round-trip",
+            "hop/ik-server-solve",
+            "hop/ik-transport",
             "hop/matching-error",
             "hop/matching-error-about-mean",
             "hop/setpoint-to-rig",
@@ -97,6 +99,13 @@ fn quick_hops_measure_the_live_graphs() {
     );
     let count = |name: &str| number(&rows[name], "count");
     assert_eq!(count("hop/ik-round-trip"), (SAMPLES / 2) as f64);
+    // Every round trip splits into the server's solve and the transport.
+    assert_eq!(count("hop/ik-server-solve"), (SAMPLES / 2) as f64);
+    assert_eq!(count("hop/ik-transport"), (SAMPLES / 2) as f64);
+    assert!(
+        number(&rows["hop/ik-transport"], "p50") < number(&rows["hop/ik-round-trip"], "p50"),
+        "{stdout}"
+    );
     assert_eq!(count("hop/setpoint-to-rig"), (SAMPLES / 10) as f64);
     assert!(
         count("hop/encoder-sample-to-subscriber") >= 0.8 * 1000.0 * WINDOW_S,

@@ -116,6 +116,7 @@ impl TestClient {
             direction: [target[3], target[4], target[5]],
             near_joints_rad: HOME_JOINTS,
         };
+        let sent = Instant::now();
         let pending = self
             .client
             .send(request)
@@ -126,7 +127,17 @@ impl TestClient {
             .receive(&pending, Duration::from_secs(5))
             .unwrap()
             .expect("an answer within 5 s");
+        let round_trip = sent.elapsed();
         assert_eq!(response.id, request.id);
+        // The server's own time is part of the round trip, and a solution takes some.
+        assert!(
+            Duration::from_nanos(response.solve_ns) < round_trip,
+            "solve {} ns in a round trip of {round_trip:?}",
+            response.solve_ns
+        );
+        if response.status == IkStatus::Ok {
+            assert!(response.solve_ns > 0, "a solution reported no solve time");
+        }
         response
     }
 }
@@ -291,6 +302,7 @@ fn ik_server_reloads_announced_parameters_and_keeps_them_when_a_file_is_corrupt(
         after_corrupt,
         IkResponse {
             id: after_corrupt.id,
+            solve_ns: after_corrupt.solve_ns,
             ..before
         }
     );

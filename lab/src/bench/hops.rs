@@ -59,13 +59,18 @@ pub const ENCODER_TO_SUBSCRIBER: &str = "hop/encoder-sample-to-subscriber";
 pub const TRACKER_FRAME_TO_MATCHED: &str = "hop/tracker-frame-to-matched";
 /// IK request → response at the client.
 pub const IK_ROUND_TRIP: &str = "hop/ik-round-trip";
+/// [`IK_ROUND_TRIP`] minus the server's solve time of the same request (as its response
+/// reports it): the round trip's transport part (the client's send and receive, the server's
+/// receive and response, both wake-ups), judged against the same baselines. Not a goal of
+/// its own; it tells the transport's share of a missed round-trip goal from the solver's.
+pub const IK_TRANSPORT: &str = "hop/ik-transport";
 /// Motor setpoint published → the rig's tick that applies it.
 pub const SETPOINT_TO_RIG: &str = "hop/setpoint-to-rig";
 /// |sync's exposure time − the rig's true exposure time| of a tracker frame.
 pub const MATCHING_ERROR: &str = "hop/matching-error";
 
 /// The hops the benchmark measures, in the order printed.
-pub const HOPS: [HopSpec; 5] = [
+pub const HOPS: [HopSpec; 6] = [
     HopSpec {
         name: ENCODER_TO_SUBSCRIBER,
         baseline: Baseline::PingPong(Payload::EncoderSample),
@@ -80,6 +85,11 @@ pub const HOPS: [HopSpec; 5] = [
         name: IK_ROUND_TRIP,
         baseline: Baseline::PingPong(Payload::Ik),
         p99_limit_ns: Some(IK_ROUND_TRIP_P99_LIMIT_NS),
+    },
+    HopSpec {
+        name: IK_TRANSPORT,
+        baseline: Baseline::PingPong(Payload::Ik),
+        p99_limit_ns: None,
     },
     HopSpec {
         name: SETPOINT_TO_RIG,
@@ -363,21 +373,26 @@ mod tests {
     fn absolute_limits_apply_with_and_without_baseline() {
         let measured = [
             hop(2, 60_000),
-            constant("uds/ik", 90_000),
-            hop(3, 540_000),
-            hop(4, 400_000),
+            hop(3, 40_000),
+            constant("uds/ik", 50_000),
+            hop(4, 540_000),
+            hop(5, 400_000),
         ];
         let rows = ratio_rows(&measured, "-");
         let ik = &rows[2];
         assert_eq!(ik.goals.len(), 3);
-        assert_eq!(ik.goals[0].outcome, Outcome::Met);
+        assert_eq!(ik.goals[0].outcome, Outcome::Missed);
         assert_eq!(ik.goals[2].goal, "p99 ≤ 50.000 µs");
         assert_eq!(ik.goals[2].outcome, Outcome::Missed);
-        let setpoint = &rows[3];
+        let transport = &rows[3];
+        assert_eq!(transport.hop, IK_TRANSPORT);
+        assert_eq!(transport.goals.len(), 2, "no absolute limit of its own");
+        assert_eq!(transport.goals[0].outcome, Outcome::Met);
+        let setpoint = &rows[4];
         assert_eq!(setpoint.goals.len(), 1);
         assert_eq!(setpoint.goals[0].goal, "p99 ≤ 550.000 µs");
         assert_eq!(setpoint.goals[0].outcome, Outcome::Met);
-        let matching = &rows[4];
+        let matching = &rows[5];
         assert_eq!(matching.p99_vs_uds, None);
         assert_eq!(matching.goals.len(), 1);
         assert_eq!(matching.goals[0].outcome, Outcome::Met);

@@ -20,18 +20,19 @@
 //! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik`, one request per
 //!   millisecond, targets near home, last, with the bench's subscriptions dropped and its
 //!   thread placed like the motion node (an IK client and nothing else, where the graph's
-//!   client runs).
+//!   client runs). Beside it [`IK_SERVER_SOLVE`], the solve time the server reports in each
+//!   response, and [`IK_TRANSPORT`], each round trip minus its request's solve time.
 //! - CPU use of every process of the graph over a window while the bench only listens.
 
 use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{self, GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE, SHIPPED_LAUNCH_FILE};
 use super::hops::{
-    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS,
-    TRACKER_FRAME_TO_MATCHED,
+    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_TRANSPORT, MATCHING_ERROR,
+    MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
 };
 use super::payload::IK_PERIOD;
-use super::stats::{format_ns, Measurement};
+use super::stats::{self, format_ns, Measurement};
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
 use sabr_launcher::placement::Placement;
@@ -69,6 +70,10 @@ pub const MATCHING_ERROR_ABOUT_MEAN: &str = "hop/matching-error-about-mean";
 /// A `TrackerFrame`'s receipt by the bench minus its `arrival_t_ns` (ns): the tracker's part
 /// of [`TRACKER_FRAME_TO_MATCHED`] (reply parsing, publishing, the wake-up of a subscriber).
 pub const TRACKER_FRAME_TO_SUBSCRIBER: &str = "hop/tracker-frame-to-subscriber";
+
+/// The time the IK server reports having spent solving a request of [`IK_ROUND_TRIP`] (ns,
+/// `IkResponse::solve_ns`): the solver as it runs in the live graph, between the other nodes.
+pub const IK_SERVER_SOLVE: &str = "hop/ik-server-solve";
 
 /// The window of [`TRACKER_FRAME_TO_SUBSCRIBER`] is the main window divided by this.
 const FRAMES_WINDOW_DIVISOR: u32 = 3;
@@ -158,7 +163,7 @@ pub fn run(
     let mut notes = hops.notes(latency_ms);
     notes.push(ik_note);
     let mut measurements = Vec::from(hops.into_measurements()?);
-    measurements.push(ik);
+    measurements.extend(ik.into_measurements());
     Ok(GraphMeasured {
         measurements,
         idle,
@@ -314,7 +319,7 @@ impl Probe {
         targets: &[Target],
         plan: &Plan,
         client: &Placement,
-    ) -> anyhow::Result<(Measurement, String)> {
+    ) -> anyhow::Result<(IkRoundTrips, String)> {
         let Probe {
             mut rt,
             encoders,
@@ -335,7 +340,7 @@ impl Probe {
             }
         };
         let mut client = IkClient::new(&rt)?;
-        let mut round_trips = Measurement::new(IK_ROUND_TRIP, "ns");
+        let mut round_trips = IkRoundTrips::default();
         let warmup = plan.ik_warmup();
         let mut next = Instant::now();
         for (index, target) in (0..warmup + plan.ik_requests).zip(targets.iter().cycle()) {
@@ -363,7 +368,7 @@ impl Probe {
                 );
             }
             if index >= warmup {
-                round_trips.record_duration(elapsed)?;
+                round_trips.record(elapsed, response.solve_ns)?;
             }
             if index % 1000 == 999 {
                 graph.check_running()?;
@@ -373,6 +378,45 @@ impl Probe {
             }
         }
         Ok((round_trips, note))
+    }
+}
+
+/// The IK round trips and their parts.
+struct IkRoundTrips {
+    round_trip: Measurement,
+    server_solve: Measurement,
+    transport: Measurement,
+}
+
+impl Default for IkRoundTrips {
+    fn default() -> Self {
+        Self {
+            round_trip: Measurement::new(IK_ROUND_TRIP, "ns"),
+            server_solve: Measurement::new(IK_SERVER_SOLVE, "ns"),
+            transport: Measurement::new(IK_TRANSPORT, "ns"),
+        }
+    }
+}
+
+impl IkRoundTrips {
+    /// Records a round trip of `elapsed` whose response reports `solve_ns`; a solve longer
+    /// than its round trip is an error (the server's report cannot be right).
+    fn record(&mut self, elapsed: Duration, solve_ns: u64) -> anyhow::Result<()> {
+        let round_trip_ns = stats::duration_ns(elapsed);
+        let Some(transport_ns) = round_trip_ns.checked_sub(solve_ns) else {
+            bail!(
+                "the IK server reported a solve of {} in a round trip of {}",
+                format_ns(solve_ns),
+                format_ns(round_trip_ns)
+            );
+        };
+        self.round_trip.record(round_trip_ns)?;
+        self.server_solve.record(solve_ns)?;
+        self.transport.record(transport_ns)
+    }
+
+    fn into_measurements(self) -> [Measurement; 3] {
+        [self.round_trip, self.server_solve, self.transport]
     }
 }
 
@@ -576,6 +620,48 @@ mod tests {
             arrival_t_ns,
             ..MatchedSample::default()
         }
+    }
+
+    #[test]
+    fn an_ik_round_trip_splits_into_the_servers_solve_and_the_transport() {
+        let mut ik = IkRoundTrips::default();
+        ik.record(Duration::from_nanos(11_000), 2_000).unwrap();
+        ik.record(Duration::from_nanos(9_000), 1_000).unwrap();
+        let error = ik
+            .record(Duration::from_nanos(3_000), 4_000)
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("solve of 4.000 µs"), "{error}");
+        let [round_trip, solve, transport] = ik.into_measurements();
+        assert_eq!(
+            (round_trip.name.as_str(), solve.name.as_str()),
+            (IK_ROUND_TRIP, IK_SERVER_SOLVE)
+        );
+        assert_eq!(transport.name, IK_TRANSPORT);
+        for (measurement, count, max) in [
+            (&round_trip, 2, 11_000),
+            (&solve, 2, 2_000),
+            (&transport, 2, 9_000),
+        ] {
+            let summary = measurement.summary();
+            assert_eq!(
+                summary.count, count,
+                "{}: the refused one is not recorded",
+                measurement.name
+            );
+            assert!(
+                summary.max.abs_diff(max) <= max / 500,
+                "{}: max {} ≠ {max}",
+                measurement.name,
+                summary.max
+            );
+        }
+        // 9 000 − 1 000 and 11 000 − 2 000: the transport part of each round trip.
+        assert!(
+            transport.summary().p50.abs_diff(8_000) <= 16,
+            "{:?}",
+            transport.summary()
+        );
     }
 
     #[test]

@@ -7,7 +7,7 @@
 use crate::solver::{IkSolver, ReloadOutcome};
 use sabr_msgs::{services, IkRequest, IkResponse, IkStatus, ParameterSetAnnouncement};
 use sabr_node::{Exit, NodeError, NodeRuntime, Subscriber, HEARTBEAT_PERIOD};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Longest sleep of the server loop: the heartbeat period.
 pub const POLL_PERIOD: Duration = HEARTBEAT_PERIOD;
@@ -43,7 +43,9 @@ pub fn serve(
             return Ok(());
         }
         let answered = server.answer(|request| {
-            let response = solver.solve(request);
+            let started = Instant::now();
+            let mut response = solver.solve(request);
+            response.solve_ns = u64::try_from(started.elapsed().as_nanos()).unwrap_or(u64::MAX);
             if response.status == IkStatus::Ok {
                 counts.solved += 1;
             } else {

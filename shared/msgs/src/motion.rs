@@ -49,7 +49,7 @@ pub enum IkStatus {
 /// Response of the IK server to an [`IkRequest`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.IkResponse.v1")]
+#[type_name("sabr.IkResponse.v2")]
 pub struct IkResponse {
     /// The request's id.
     pub id: u64,
@@ -63,6 +63,10 @@ pub struct IkResponse {
     pub counts: [f64; JOINTS],
     /// Version of the parameter set used ([`ParameterSetAnnouncement::version`]).
     pub parameter_version: u64,
+    /// How long the server spent solving this request, ns (its `CLOCK_MONOTONIC`, from the
+    /// request in hand to the response's contents): a round trip's time outside the
+    /// transport. 0 when no server solved it.
+    pub solve_ns: u64,
 }
 
 /// Announces that a new calibration parameter file was written (by `calibrator`).
