@@ -181,7 +181,15 @@ impl LiveGraph {
         let output = std::fs::File::create(&launcher_log)
             .with_context(|| format!("cannot create {}", launcher_log.display()))?;
         let exe = bin_dir.join("sabr");
-        let launcher = Command::new(&exe)
+        let mut command = Command::new(&exe);
+        // The bench starts graphs from its measuring thread, placed above the graph: the
+        // launcher, and the nodes without a policy of their own, must not inherit that.
+        Placement::unplaced()
+            .and_then(|unplaced| unplaced.prepare())
+            .map_err(anyhow::Error::msg)
+            .context("cannot place the launcher")?
+            .apply_in_child(&mut command);
+        let launcher = command
             .arg("launch")
             .arg(&file)
             .arg("--run-dir")

@@ -116,6 +116,24 @@ impl Placement {
         self.cpus.is_none() && self.sched.is_none()
     }
 
+    /// The placement of a process started without one: the normal policy (`SCHED_OTHER`) on
+    /// the CPUs of this process's main thread. A child inherits the placement of the thread
+    /// that starts it; a child started from a placed thread (a real-time measuring thread,
+    /// say) is given this one instead, so that neither it nor the nodes it starts without a
+    /// placement of their own run at that thread's priority or on its CPUs.
+    pub fn unplaced() -> Result<Self, String> {
+        let main_thread = nix::unistd::Pid::this();
+        let set = nix::sched::sched_getaffinity(main_thread)
+            .map_err(|e| format!("cannot read the CPUs of this process: {e}"))?;
+        let cpus = (0..CpuSet::count())
+            .filter(|&cpu| set.is_set(cpu).unwrap_or(false))
+            .collect();
+        Ok(Self {
+            cpus: Some(cpus),
+            sched: Some(Sched::Other),
+        })
+    }
+
     /// The CPU set and policy in the form the child applies.
     pub fn prepare(&self) -> Result<Prepared, String> {
         let cpus = match &self.cpus {
@@ -170,6 +188,18 @@ impl Prepared {
             set_scheduler(sched)?;
         }
         Ok(())
+    }
+
+    /// Makes the child of `command` apply this placement between fork and exec.
+    #[allow(unsafe_code)]
+    pub fn apply_in_child(self, command: &mut std::process::Command) {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: the closure runs in the child between fork and exec; `apply` only makes
+        // the async-signal-safe system calls sched_setaffinity and sched_setscheduler and
+        // does not allocate.
+        unsafe {
+            command.pre_exec(move || Ok(self.apply()?));
+        }
     }
 
     /// Applies the placement to the running process `pid` (its main thread), e.g. the peer
@@ -242,6 +272,39 @@ mod tests {
         let error = check_cpus(&[4096]).unwrap_err();
         assert!(error.contains("CPU 4096 does not exist"), "{error}");
         assert!(check_cpus(&[]).is_err());
+    }
+
+    #[test]
+    fn a_child_started_from_a_placed_thread_runs_unplaced() {
+        let unplaced = Placement::unplaced().unwrap();
+        let cpus = unplaced.cpus.clone().unwrap();
+        assert!(!cpus.is_empty() && cpus.iter().all(|&cpu| cpu < online_cpus()));
+        assert_eq!(unplaced.sched, Some(Sched::Other));
+        // A thread confined to one CPU starts a child: the child reports every CPU of the
+        // process, not the thread's one.
+        let only_first = Placement {
+            cpus: Some(vec![cpus[0]]),
+            sched: None,
+        };
+        let prepared = unplaced.prepare().unwrap();
+        let allowed = std::thread::spawn(move || {
+            only_first.prepare().unwrap().apply().unwrap();
+            let mut command = std::process::Command::new("sh");
+            command.args(["-c", "grep Cpus_allowed_list /proc/self/status"]);
+            prepared.apply_in_child(&mut command);
+            command.output().unwrap()
+        })
+        .join()
+        .unwrap();
+        assert!(allowed.status.success(), "{allowed:?}");
+        let child = String::from_utf8(allowed.stdout).unwrap();
+        // (`/proc/self` is the process: its main thread.)
+        let process = std::fs::read_to_string("/proc/self/status").unwrap();
+        let process = process
+            .lines()
+            .find(|line| line.starts_with("Cpus_allowed_list"))
+            .unwrap();
+        assert_eq!(child.trim(), process.trim());
     }
 
     #[test]
