@@ -482,23 +482,23 @@ fn drain_echo(echo: Option<JoinHandle<()>>) {
 }
 
 /// In the child before exec: makes the kernel send SIGTERM to the child when the launcher
-/// dies (so no node outlives it), then applies the node's CPU set and scheduling policy.
+/// dies (so no node outlives it), then applies the node's CPU set and scheduling policy
+/// (the steps run in the order they were added).
 #[allow(unsafe_code)]
 fn prepare_child(command: &mut Command, placement: Prepared) {
     let launcher = nix::unistd::getpid();
     // SAFETY: the closure runs in the child between fork and exec; it only makes the
-    // async-signal-safe system calls prctl, getppid, sched_setaffinity and
-    // sched_setscheduler and does not allocate.
+    // async-signal-safe system calls prctl and getppid and does not allocate.
     unsafe {
         command.pre_exec(move || {
             nix::sys::prctl::set_pdeathsig(Signal::SIGTERM)?;
             if nix::unistd::getppid() != launcher {
                 return Err(nix::errno::Errno::ESRCH.into());
             }
-            placement.apply()?;
             Ok(())
         });
     }
+    placement.apply_in_child(command);
 }
 
 /// Waits up to `grace` for the child to exit.
