@@ -13,6 +13,7 @@
 //! Vectors are `[x, y, z]` arrays so that the nalgebra and the glam kinematics share this code.
 
 use std::f64::consts::TAU;
+use std::sync::LazyLock;
 
 /// Largest number of roots of a degree-2 trigonometric polynomial.
 pub(super) const MAX_ROOTS: usize = 4;
@@ -43,16 +44,29 @@ impl PlaneCondition {
             + self.d * (cos * cos - sin * sin)
     }
 
-    /// The root in `[low, high]`, where the condition changes sign, by Newton steps that fall
-    /// back to bisection when they leave the bracket.
-    fn root_between(&self, mut low: f64, mut high: f64, value_low: f64) -> f64 {
+    /// The root in `[low, high]`, where the condition changes sign (`value_low` at `low`,
+    /// `value_high` at `high`), as its cosine and sine: Newton steps from the secant's
+    /// crossing that fall back to bisection when they leave the bracket. A small step turns
+    /// the cosine and sine by a short series instead of evaluating them again.
+    fn root_between(
+        &self,
+        mut low: f64,
+        mut high: f64,
+        value_low: f64,
+        value_high: f64,
+    ) -> (f64, f64) {
         let rising = value_low < 0.0;
-        let mut phi = 0.5 * (low + high);
+        let secant = low + (high - low) * value_low / (value_low - value_high);
+        let mut phi = if secant > low && secant < high {
+            secant
+        } else {
+            0.5 * (low + high)
+        };
+        let (mut sin, mut cos) = phi.sin_cos();
         for _ in 0..MAX_ITERATIONS {
-            let (sin, cos) = phi.sin_cos();
             let value = self.value(cos, sin);
             if value == 0.0 {
-                return phi;
+                return (cos, sin);
             }
             if (value < 0.0) == rising {
                 low = phi;
@@ -63,20 +77,43 @@ impl PlaneCondition {
             let newton = phi - step;
             if newton >= low && newton <= high {
                 // Quadratic convergence: after a step this small the error is far below
-                // rounding.
+                // rounding (and the first order of the turn is exact to rounding).
                 if step.abs() <= 1e-13 {
-                    return newton;
+                    return (cos + step * sin, sin - step * cos);
                 }
                 phi = newton;
+                (cos, sin) = if step.abs() <= SERIES_TURN_MAX {
+                    turned(cos, sin, -step)
+                } else {
+                    let (sin, cos) = phi.sin_cos();
+                    (cos, sin)
+                };
             } else {
                 phi = 0.5 * (low + high);
+                (sin, cos) = phi.sin_cos();
             }
             if high - low <= 1e-15 {
                 break;
             }
         }
-        phi
+        (cos, sin)
     }
+}
+
+/// Largest turn (rad) that [`turned`] makes by its series: their next terms are below
+/// 1e-16 up to here.
+const SERIES_TURN_MAX: f64 = 0.03;
+
+/// `(cos(φ + δ), sin(φ + δ))` from `(cos φ, sin φ)` for |δ| ≤ [`SERIES_TURN_MAX`], with the
+/// cosine and sine of δ by their Taylor series to the δ⁶ and δ⁷ terms.
+fn turned(cos: f64, sin: f64, delta: f64) -> (f64, f64) {
+    let d2 = delta * delta;
+    let cos_delta = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    let sin_delta = delta * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0)));
+    (
+        cos * cos_delta - sin * sin_delta,
+        sin * cos_delta + cos * sin_delta,
+    )
 }
 
 /// A vector `[x, y, z]` (`Bb`).
@@ -149,32 +186,36 @@ pub(super) fn gimbal_plane_directions(p_r: &[f64; 3], z: &[f64; 3], offset: f64)
         items: [[0.0; 3]; MAX_ROOTS],
         len: 0,
     };
+    let samples = &*SAMPLED;
+    // All samples first: independent evaluations, no chain through a recurrence.
+    let values: [f64; SAMPLES] =
+        std::array::from_fn(|k| condition.value(samples[k].0, samples[k].1));
     let step = TAU / SAMPLES as f64;
-    let (step_sin, step_cos) = step.sin_cos();
-    let (mut cos, mut sin) = (1.0, 0.0);
-    let mut value = condition.value(cos, sin);
-    for k in 0..SAMPLES {
-        let low = k as f64 * step;
-        let (next_cos, next_sin) = (
-            cos * step_cos - sin * step_sin,
-            sin * step_cos + cos * step_sin,
-        );
-        let next_value = condition.value(next_cos, next_sin);
-        let phi = if value == 0.0 {
-            Some(low)
+    for (k, &value) in values.iter().enumerate() {
+        // The last interval ends where the first starts (φ = 2π is φ = 0).
+        let next_value = values[(k + 1) % SAMPLES];
+        let root = if value == 0.0 {
+            Some(samples[k])
         } else if (value < 0.0) != (next_value < 0.0) && next_value != 0.0 {
-            Some(condition.root_between(low, low + step, value))
+            let low = k as f64 * step;
+            Some(condition.root_between(low, low + step, value, next_value))
         } else {
             None
         };
-        if let Some(phi) = phi {
-            let (s, c) = phi.sin_cos();
+        if let Some((c, s)) = root {
             roots.push(std::array::from_fn(|i| c * e1[i] + s * e2[i]));
         }
-        (cos, sin, value) = (next_cos, next_sin, next_value);
     }
     roots
 }
+
+/// `(cos φ, sin φ)` of the sampled rolls φ = k·2π/[`SAMPLES`], k = 0..[`SAMPLES`].
+static SAMPLED: LazyLock<[(f64, f64); SAMPLES]> = LazyLock::new(|| {
+    std::array::from_fn(|k| {
+        let (sin, cos) = (k as f64 * TAU / SAMPLES as f64).sin_cos();
+        (cos, sin)
+    })
+});
 
 #[cfg(test)]
 mod tests {
@@ -196,6 +237,31 @@ mod tests {
         assert!(roots
             .iter()
             .all(|v| v[0].abs() < 1e-12 && v[2].abs() < 1e-12));
+    }
+
+    /// The series turn agrees with `sin_cos` of the turned angle to rounding over its range.
+    #[test]
+    fn series_turns_match_sin_cos() {
+        for phi in [0.0, 0.7, 2.0, -2.9] {
+            for delta in [
+                0.0,
+                1e-9,
+                -1e-5,
+                0.003,
+                -0.017,
+                SERIES_TURN_MAX,
+                -SERIES_TURN_MAX,
+            ] {
+                let (sin, cos) = f64::sin_cos(phi);
+                let (turned_cos, turned_sin) = turned(cos, sin, delta);
+                let (expected_sin, expected_cos) = (phi + delta).sin_cos();
+                assert!(
+                    (turned_cos - expected_cos).abs() < 4e-16
+                        && (turned_sin - expected_sin).abs() < 4e-16,
+                    "φ {phi}, δ {delta}: ({turned_cos}, {turned_sin}) vs ({expected_cos}, {expected_sin})"
+                );
+            }
+        }
     }
 
     /// Every root found satisfies the plane condition det[z, v, P(p_r + d v)] = 0 and is ⊥ z.

@@ -63,18 +63,27 @@ impl FiveBar {
                  reachable annulus [{inner:.3}, {outer:.3}] mm"
             ));
         }
-        let cos_spread =
-            (reach * reach + self.l * self.l - self.distal * self.distal) / (2.0 * self.l * reach);
-        let spread = cos_spread.clamp(-1.0, 1.0).acos();
+        let cos_spread = ((reach * reach + self.l * self.l - self.distal * self.distal)
+            / (2.0 * self.l * reach))
+            .clamp(-1.0, 1.0);
+        let spread = cos_spread.acos();
+        // The spread is in [0, π]: its sine is not negative.
+        let sin_spread = (1.0 - cos_spread * cos_spread).sqrt();
         let bearing = y.atan2(x);
+        let (cos_bearing, sin_bearing) = (x / reach, y / reach);
         let (cos_beta, sin_beta) = self.distal_direction;
-        let solve = |proximal: f64| {
-            let (s, c) = proximal.sin_cos();
+        // θp = bearing ∓ spread, its cosine and sine by the angle sums (no sin_cos call).
+        let solve = |proximal: f64, c: f64, s: f64| {
             let (dx, dy) = (x - self.l * c, y - self.l * s);
             // θd: the distal vector's bearing minus its angle β relative to θd.
             let distal = (dy * cos_beta - dx * sin_beta).atan2(dx * cos_beta + dy * sin_beta);
             (proximal, distal)
         };
-        Ok([solve(bearing - spread), solve(bearing + spread)])
+        let (along, across) = (cos_bearing * cos_spread, sin_bearing * sin_spread);
+        let (lift, turn) = (sin_bearing * cos_spread, cos_bearing * sin_spread);
+        Ok([
+            solve(bearing - spread, along + across, lift - turn),
+            solve(bearing + spread, along - across, lift + turn),
+        ])
     }
 }
