@@ -82,6 +82,48 @@ fn a_publisher_loaning_ahead_never_runs_out_of_samples() {
     release(&domain);
 }
 
+/// Publishers that go away leave their unread samples to the subscriber: it keeps their
+/// connections (its expired-connection buffer) until it has read them, as many as can be
+/// connected at once.
+#[test]
+fn samples_of_publishers_that_went_away_are_still_received() {
+    let domain = unique_domain("departed");
+    let rt = NodeRuntime::with_domain("consumer", domain.clone()).unwrap();
+    let subscriber = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let publishers: Vec<_> = (0..domain
+        .iceoryx_config()
+        .defaults
+        .publish_subscribe
+        .max_publishers)
+        .map(|_| {
+            rt.publisher::<EncoderSample>(services::ENCODER_SAMPLES)
+                .unwrap()
+        })
+        .collect();
+    // The subscriber connects to every publisher (nothing sent yet).
+    assert_eq!(subscriber.try_recv().unwrap(), None);
+    for (seq, publisher) in (0..).zip(&publishers) {
+        let sample = EncoderSample {
+            seq,
+            t_ns: 0,
+            counts: [0; 5],
+        };
+        publisher.send(sample).unwrap();
+    }
+    let sent = publishers.len() as u64;
+    drop(publishers);
+    let mut received = Vec::new();
+    subscriber
+        .drain(|sample| received.push(sample.seq))
+        .unwrap();
+    received.sort_unstable();
+    assert_eq!(received, (0..sent).collect::<Vec<_>>());
+    drop((subscriber, rt));
+    release(&domain);
+}
+
 #[test]
 fn run_on_data_wakes_on_samples_and_idles_without() {
     let domain = unique_domain("wake");
