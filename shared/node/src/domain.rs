@@ -72,9 +72,10 @@ impl Domain {
     /// A receiving port (subscriber, client, server) keeps the connections of senders that went
     /// away with data still unread, up to its expired-connection buffer, and every receive that
     /// finds nothing scans all its connection slots, expired ones included. iceoryx2's default
-    /// of 128 each made that scan the largest part of an empty receive; the buffers here hold as
-    /// many departed senders as can be connected at once (a sender that leaves after those is
-    /// dropped with its unread data, logged by iceoryx2). Alternated quick benches on the
+    /// of 128 each made that scan the largest part of an empty receive. The buffers here hold at
+    /// least as many departed senders as can be connected at once: twice the publishers of a
+    /// subscriber and the servers of a client, the clients of a server (a sender that leaves
+    /// beyond that is dropped with its unread data, logged by iceoryx2). Alternated quick benches on the
     /// development VM (2026-12-05): the IK round trip's transport part p50 8.7–9.5 µs against
     /// 9.1–10.6 µs with the defaults.
     pub fn iceoryx_config(&self) -> Config {

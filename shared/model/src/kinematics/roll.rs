@@ -82,12 +82,11 @@ impl PlaneCondition {
                     return (cos + step * sin, sin - step * cos);
                 }
                 phi = newton;
-                (cos, sin) = if step.abs() <= SERIES_TURN_MAX {
-                    turned(cos, sin, -step)
+                if step.abs() <= SERIES_TURN_MAX {
+                    (cos, sin) = turned(cos, sin, -step);
                 } else {
-                    let (sin, cos) = phi.sin_cos();
-                    (cos, sin)
-                };
+                    (sin, cos) = phi.sin_cos();
+                }
             } else {
                 phi = 0.5 * (low + high);
                 (sin, cos) = phi.sin_cos();
