@@ -107,17 +107,18 @@ const ROUNDS: u64 = 10;
 const PACED_TRANSPORTS: [Transport; 3] = [Transport::Uds, Transport::Doorbell, Transport::Futex];
 
 impl Settings {
-    /// The ping-pong plan paced at `pause`: as many round trips as fit the paced window (at
-    /// least 20, at most a tenth of the back-to-back ones); the pong's idle CPU is not
-    /// measured (the back-to-back rows measure it).
-    fn paced_plan(&self, pause: Duration) -> pingpong::Plan {
-        let fit = (self.paced_window.as_nanos() / pause.as_nanos().max(1)) as u64;
+    /// The ping-pong plan of `burst` round trips after each `pause`: as many round trips as
+    /// fit the paced window (at least 20, at most a tenth of the back-to-back ones); the
+    /// pong's idle CPU is not measured (the back-to-back rows measure it).
+    fn paced_plan(&self, pause: Duration, burst: u64) -> pingpong::Plan {
+        let fit = (self.paced_window.as_nanos() / pause.as_nanos().max(1)) as u64 * burst;
         pingpong::Plan {
             warmup: 10,
             samples: fit.clamp(20, (self.ping_pong.samples / 10).max(20)),
             rounds: ROUNDS,
             idle_window: None,
             pause,
+            burst,
         }
     }
 
@@ -144,6 +145,7 @@ impl Settings {
                 rounds: ROUNDS,
                 idle_window: Some(Duration::from_millis(if args.quick { 300 } else { 2_000 })),
                 pause: Duration::ZERO,
+                burst: 1,
             },
             paced_window: Duration::from_secs(if args.quick { 1 } else { 5 }),
             kinematics_batches: (samples / compute::SOLVES_PER_BATCH).max(10),
@@ -346,7 +348,8 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         run_group(&TOGETHER, payload, &settings.ping_pong);
         run_group(&[Transport::FutexCross], payload, &settings.ping_pong);
         if let Some(pause) = payload.live_period() {
-            run_group(&PACED_TRANSPORTS, payload, &settings.paced_plan(pause));
+            let plan = settings.paced_plan(pause, payload.live_burst());
+            run_group(&PACED_TRANSPORTS, payload, &plan);
         }
     }
     let paced = PACED_TRANSPORTS.iter().flat_map(|&transport| {

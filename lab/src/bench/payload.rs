@@ -3,12 +3,13 @@
 use sabr_model::RobotParams;
 use sabr_node::msgs::{
     EncoderSample, IkRequest, IkResponse, MatchedSample, MotorSetpoint, TrackerFrame,
-    ENCODER_RATE_HZ,
+    ENCODER_RATE_HZ, IK_REQUESTS_PER_SETPOINT_PERIOD, SETPOINT_PERIOD_NS,
 };
 use std::time::Duration;
 
-/// Time between two IK requests of the live graph: the motion node's setpoint rate.
-pub const IK_PERIOD: Duration = Duration::from_millis(1);
+/// Time between two bursts of IK requests of the live graph: the motion node's setpoint
+/// period.
+pub const IK_PERIOD: Duration = Duration::from_nanos(SETPOINT_PERIOD_NS.unsigned_abs());
 
 /// The request → response message pair of a ping-pong, one per live-graph hop, so each hop is
 /// compared with a baseline carrying the same bytes.
@@ -44,6 +45,15 @@ impl Payload {
             )),
             Payload::Ik => Some(IK_PERIOD),
             Payload::MotorSetpoint => None,
+        }
+    }
+
+    /// How many requests of this payload the live graph sends back to back in each
+    /// [`Payload::live_period`]: the motion node's burst of IK requests, one of every other.
+    pub fn live_burst(self) -> u64 {
+        match self {
+            Payload::Ik => IK_REQUESTS_PER_SETPOINT_PERIOD as u64,
+            Payload::EncoderSample | Payload::TrackerFrame | Payload::MotorSetpoint => 1,
         }
     }
 
@@ -184,6 +194,14 @@ mod tests {
             "the simulated tracker runs at 20 Hz"
         );
         assert_eq!(Payload::MotorSetpoint.live_period(), None);
+        assert_eq!(
+            (Payload::Ik.live_period(), Payload::Ik.live_burst()),
+            (Some(Duration::from_millis(1)), 10),
+            "the motion node's line planner: 10 requests per setpoint period"
+        );
+        for payload in [Payload::EncoderSample, Payload::TrackerFrame] {
+            assert_eq!(payload.live_burst(), 1, "{}", payload.name());
+        }
         assert_eq!(paced_name(Transport::Futex, Payload::Ik), "futex-paced/ik");
     }
 

@@ -47,10 +47,13 @@ pub struct Plan {
     /// Window over which the pong's CPU use is measured while it waits for a message;
     /// `None`: not measured.
     pub idle_window: Option<Duration>,
-    /// Pause after each round trip: zero back to back (caches and wake-up paths hot), else
-    /// the period at which the live graph sends the payload, so the round trip runs as cold
-    /// as the hop it stands for. A paced row is named by [`paced_name`].
+    /// Pause before each burst of round trips: zero back to back (caches and wake-up paths
+    /// hot), else the period at which the live graph sends the payload, so the round trips run
+    /// as cold as the hop they stand for. A paced row is named by [`paced_name`].
     pub pause: Duration,
+    /// Round trips back to back after each pause (0 counts as 1): as many as the live graph
+    /// sends in one period ([`Payload::live_burst`]).
+    pub burst: u64,
 }
 
 impl Plan {
@@ -62,6 +65,12 @@ impl Plan {
         } else {
             paced_name(transport, payload)
         }
+    }
+
+    /// Whether the round trip `index` (from 0) of a run waits for the pause first: the first
+    /// of every burst.
+    fn pauses_before(&self, index: u64) -> bool {
+        index.is_multiple_of(self.burst.max(1))
     }
 
     /// Slices, at least one.
@@ -343,11 +352,14 @@ struct Session<'a> {
 }
 
 impl Session<'_> {
-    /// Runs `count` round trips, each followed by the plan's pause, recording them if
-    /// `record`.
+    /// Runs `count` round trips in bursts of the plan's, each burst after the plan's pause,
+    /// recording them if `record`.
     fn run(&mut self, count: u64, record: bool) -> anyhow::Result<()> {
         let name = &self.name;
         for index in 0..count {
+            if self.plan.pauses_before(index) {
+                std::thread::sleep(self.plan.pause);
+            }
             let start = Instant::now();
             (self.round_trip)(start + ROUND_TRIP_TIMEOUT).with_context(|| {
                 let what = if record {
@@ -360,7 +372,6 @@ impl Session<'_> {
             if record {
                 self.round_trips.record_duration(start.elapsed())?;
             }
-            std::thread::sleep(self.plan.pause);
         }
         Ok(())
     }
@@ -482,6 +493,7 @@ mod tests {
             rounds,
             idle_window: None,
             pause: Duration::ZERO,
+            burst: 1,
         }
     }
 
@@ -498,6 +510,20 @@ mod tests {
             assert_eq!(plan.pong_count(), round_trips, "{plan:?}");
         }
         assert_eq!(plan(2000, 20_000, 10).slice_warmup(), 200);
+    }
+
+    #[test]
+    fn a_burst_of_round_trips_follows_each_pause() {
+        let paused = |burst: u64| -> Vec<u64> {
+            let plan = Plan {
+                burst,
+                ..plan(0, 25, 1)
+            };
+            (0..25).filter(|&index| plan.pauses_before(index)).collect()
+        };
+        assert_eq!(paused(10), [0, 10, 20]);
+        assert_eq!(paused(1), (0..25).collect::<Vec<_>>());
+        assert_eq!(paused(0), paused(1), "0 counts as 1");
     }
 
     #[test]

@@ -17,21 +17,24 @@
 //!   [`MATCHING_ERROR_ABOUT_MEAN`], the same about its mean (the constant part a calibrated
 //!   latency absorbs, e.g. the tracker driver's polling delay, which the simulated latency
 //!   does not include).
-//! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik`, one request per
-//!   millisecond, targets near home, last, with the bench's subscriptions dropped and its
-//!   thread placed like the motion node (an IK client and nothing else, where the graph's
-//!   client runs). Beside it [`IK_SERVER_SOLVE`], the solve time the server reports in each
-//!   response, and [`IK_TRANSPORT`], each round trip minus its request's solve time.
+//! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik` as the motion node
+//!   calls it while it plans a line: bursts of
+//!   [`IK_REQUESTS_PER_SETPOINT_PERIOD`](sabr_node::msgs::IK_REQUESTS_PER_SETPOINT_PERIOD)
+//!   requests back to back, one burst per setpoint period, targets near home; last, with the bench's
+//!   subscriptions dropped and its thread placed like the motion node (an IK client and
+//!   nothing else, where the graph's client runs). Beside it [`IK_SERVER_SOLVE`], the solve
+//!   time the server reports in each response, [`IK_TRANSPORT`], each round trip minus its
+//!   request's solve time, and [`IK_ROUND_TRIP_FIRST`], the first round trip of each burst.
 //! - CPU use of every process of the graph over a window while the bench only listens.
 
 use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{self, GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE, SHIPPED_LAUNCH_FILE};
 use super::hops::{
-    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_TRANSPORT, MATCHING_ERROR,
-    MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
+    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_ROUND_TRIP_FIRST, IK_TRANSPORT,
+    MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
 };
-use super::payload::IK_PERIOD;
+use super::payload::{Payload, IK_PERIOD};
 use super::stats::{self, format_ns, Measurement};
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
@@ -308,10 +311,10 @@ impl Probe {
         })
     }
 
-    /// Times IK requests to the graph's server, one per [`IK_PERIOD`], as the motion node
-    /// makes them: after dropping the bench's subscriptions (the bench is then an IK client
-    /// and nothing else; a sample rung into its doorbell would wake it while it waits for a
-    /// response), and from the calling thread placed as `client` (the motion node's place;
+    /// Times IK requests to the graph's server as the motion node makes them, in bursts of
+    /// [`Payload::live_burst`] back to back, one burst per [`IK_PERIOD`]: after dropping the
+    /// bench's subscriptions (the bench is then an IK client and nothing else; a sample rung
+    /// into its doorbell would wake it while it waits for a response), and from the calling thread placed as `client` (the motion node's place;
     /// the bench listened above the graph before). Also returns the note on the placement.
     fn ik_round_trips(
         self,
@@ -342,13 +345,17 @@ impl Probe {
         let mut client = IkClient::new(&rt)?;
         let mut round_trips = IkRoundTrips::default();
         let warmup = plan.ik_warmup();
+        let burst = Payload::Ik.live_burst();
         let mut next = Instant::now();
         for (index, target) in (0..warmup + plan.ik_requests).zip(targets.iter().cycle()) {
-            let now = Instant::now();
-            if next > now {
-                std::thread::sleep(next - now);
+            let first = index.is_multiple_of(burst);
+            if first {
+                let now = Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                }
+                next = next.max(now) + IK_PERIOD;
             }
-            next = next.max(now) + IK_PERIOD;
             let request = IkRequest {
                 id: 0,
                 tip_mm: [target.tip.x, target.tip.y, target.tip.z],
@@ -368,7 +375,7 @@ impl Probe {
                 );
             }
             if index >= warmup {
-                round_trips.record(elapsed, response.solve_ns)?;
+                round_trips.record(elapsed, response.solve_ns, first)?;
             }
             if index % 1000 == 999 {
                 graph.check_running()?;
@@ -381,11 +388,12 @@ impl Probe {
     }
 }
 
-/// The IK round trips and their parts.
+/// The IK round trips, their parts, and the first of each burst.
 struct IkRoundTrips {
     round_trip: Measurement,
     server_solve: Measurement,
     transport: Measurement,
+    first_of_burst: Measurement,
 }
 
 impl Default for IkRoundTrips {
@@ -394,14 +402,16 @@ impl Default for IkRoundTrips {
             round_trip: Measurement::new(IK_ROUND_TRIP, "ns"),
             server_solve: Measurement::new(IK_SERVER_SOLVE, "ns"),
             transport: Measurement::new(IK_TRANSPORT, "ns"),
+            first_of_burst: Measurement::new(IK_ROUND_TRIP_FIRST, "ns"),
         }
     }
 }
 
 impl IkRoundTrips {
-    /// Records a round trip of `elapsed` whose response reports `solve_ns`; a solve longer
-    /// than its round trip is an error (the server's report cannot be right).
-    fn record(&mut self, elapsed: Duration, solve_ns: u64) -> anyhow::Result<()> {
+    /// Records a round trip of `elapsed` whose response reports `solve_ns`, also as the first
+    /// of its burst if `first`; a solve longer than its round trip is an error (the server's
+    /// report cannot be right).
+    fn record(&mut self, elapsed: Duration, solve_ns: u64, first: bool) -> anyhow::Result<()> {
         let round_trip_ns = stats::duration_ns(elapsed);
         let Some(transport_ns) = round_trip_ns.checked_sub(solve_ns) else {
             bail!(
@@ -412,11 +422,20 @@ impl IkRoundTrips {
         };
         self.round_trip.record(round_trip_ns)?;
         self.server_solve.record(solve_ns)?;
-        self.transport.record(transport_ns)
+        self.transport.record(transport_ns)?;
+        if first {
+            self.first_of_burst.record(round_trip_ns)?;
+        }
+        Ok(())
     }
 
-    fn into_measurements(self) -> [Measurement; 3] {
-        [self.round_trip, self.server_solve, self.transport]
+    fn into_measurements(self) -> [Measurement; 4] {
+        [
+            self.round_trip,
+            self.server_solve,
+            self.transport,
+            self.first_of_burst,
+        ]
     }
 }
 
@@ -625,23 +644,28 @@ mod tests {
     #[test]
     fn an_ik_round_trip_splits_into_the_servers_solve_and_the_transport() {
         let mut ik = IkRoundTrips::default();
-        ik.record(Duration::from_nanos(11_000), 2_000).unwrap();
-        ik.record(Duration::from_nanos(9_000), 1_000).unwrap();
+        ik.record(Duration::from_nanos(11_000), 2_000, false)
+            .unwrap();
+        ik.record(Duration::from_nanos(9_000), 1_000, true).unwrap();
         let error = ik
-            .record(Duration::from_nanos(3_000), 4_000)
+            .record(Duration::from_nanos(3_000), 4_000, true)
             .unwrap_err()
             .to_string();
         assert!(error.contains("solve of 4.000 µs"), "{error}");
-        let [round_trip, solve, transport] = ik.into_measurements();
+        let [round_trip, solve, transport, first] = ik.into_measurements();
         assert_eq!(
             (round_trip.name.as_str(), solve.name.as_str()),
             (IK_ROUND_TRIP, IK_SERVER_SOLVE)
         );
-        assert_eq!(transport.name, IK_TRANSPORT);
+        assert_eq!(
+            (transport.name.as_str(), first.name.as_str()),
+            (IK_TRANSPORT, IK_ROUND_TRIP_FIRST)
+        );
         for (measurement, count, max) in [
             (&round_trip, 2, 11_000),
             (&solve, 2, 2_000),
             (&transport, 2, 9_000),
+            (&first, 1, 9_000),
         ] {
             let summary = measurement.summary();
             assert_eq!(

@@ -203,7 +203,7 @@ impl Args {
                 speed_mm_s: self.line_speed_mm_s,
                 dwell_s: self.line_dwell_s,
             },
-            ik_requests_per_period: 10,
+            ik_requests_per_period: sabr_msgs::IK_REQUESTS_PER_SETPOINT_PERIOD,
         })
     }
 

@@ -7,7 +7,7 @@ use sabr_model::plan::{excitation_centre, PlanDurations, SessionPlan};
 use sabr_model::{Joints, RobotParams, HOME_JOINTS};
 
 /// Setpoint period (ns): setpoints go out at 1 kHz.
-pub const PERIOD_NS: i64 = 1_000_000;
+pub const PERIOD_NS: i64 = sabr_msgs::SETPOINT_PERIOD_NS;
 /// Setpoint period (s).
 pub const PERIOD_S: f64 = PERIOD_NS as f64 * 1e-9;
 /// Name of the pieces of a plan between its phases (moves and pauses).

@@ -21,7 +21,7 @@ pub use fixed_string::{FixedString, FixedStringError};
 pub use graph::{Lifecycle, LifecycleState, NodeLabel};
 pub use motion::{
     IkRequest, IkResponse, IkStatus, MotionState, MotionStatus, MotorSetpoint,
-    ParameterSetAnnouncement, PhaseMark,
+    ParameterSetAnnouncement, PhaseMark, IK_REQUESTS_PER_SETPOINT_PERIOD, SETPOINT_PERIOD_NS,
 };
 pub use sensing::{
     CounterLatch, EncoderSample, LatencySource, MatchQuality, MatchedSample, RigTruth, Tool,

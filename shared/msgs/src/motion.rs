@@ -3,6 +3,14 @@
 use crate::{FixedString, JOINTS};
 use iceoryx2::prelude::ZeroCopySend;
 
+/// Period of the motion node's setpoints (ns): it publishes a [`MotorSetpoint`] every 1 ms.
+pub const SETPOINT_PERIOD_NS: i64 = 1_000_000;
+
+/// Most [`IkRequest`]s the motion node sends back to back in one setpoint period: its line
+/// planner solves the line's waypoints in bursts of this many per period, so the IK server
+/// sees bursts, the first request of each finding the path cold after a period of other work.
+pub const IK_REQUESTS_PER_SETPOINT_PERIOD: usize = 10;
+
 /// A position setpoint for the five motors (published by `motion` at 1 kHz, read by the rig).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
