@@ -560,5 +560,16 @@ mod tests {
                 placed.ping
             );
         }
+        // The IK client outranks the other producers on its core, so a tick of theirs that
+        // falls inside a burst of IK requests waits for the burst's end.
+        let motion = shipped("motion");
+        for node in ["encoders", "tracker"] {
+            let other = shipped(node);
+            assert_eq!(other.cpus, motion.cpus, "{node}");
+            assert!(
+                priority(&motion) > priority(&other),
+                "motion ({motion}) is not above {node} ({other})"
+            );
+        }
     }
 }
