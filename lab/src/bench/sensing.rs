@@ -20,9 +20,9 @@
 //! - [`IK_ROUND_TRIP`]: `IkClient::solve` from the bench to `sabr-ik` as the motion node
 //!   calls it while it plans a line: bursts of
 //!   [`IK_REQUESTS_PER_SETPOINT_PERIOD`](sabr_node::msgs::IK_REQUESTS_PER_SETPOINT_PERIOD)
-//!   requests back to back, one burst per setpoint period, targets near home; last, with the bench's
-//!   subscriptions dropped and its thread placed like the motion node (an IK client and
-//!   nothing else, where the graph's client runs). Beside it [`IK_SERVER_SOLVE`], the solve
+//!   requests back to back, one burst per setpoint period, targets near home; last, with the
+//!   bench's subscriptions dropped and its thread placed like the motion node (an IK client
+//!   and nothing else, where the graph's client runs). Beside it [`IK_SERVER_SOLVE`], the solve
 //!   time the server reports in each response, [`IK_TRANSPORT`], each round trip minus its
 //!   request's solve time, and [`IK_ROUND_TRIP_FIRST`], the first round trip of each burst.
 //! - CPU use of every process of the graph over a window while the bench only listens.
@@ -109,7 +109,8 @@ impl Plan {
             + LOCK_TIMEOUT
             + self.cpu_window
             + self.window
-            + IK_PERIOD * (self.ik_requests + self.ik_warmup()) as u32
+            + IK_PERIOD
+                * (self.ik_requests + self.ik_warmup()).div_ceil(Payload::Ik.live_burst()) as u32
             + Duration::from_secs(120)
     }
 }
@@ -314,8 +315,9 @@ impl Probe {
     /// Times IK requests to the graph's server as the motion node makes them, in bursts of
     /// [`Payload::live_burst`] back to back, one burst per [`IK_PERIOD`]: after dropping the
     /// bench's subscriptions (the bench is then an IK client and nothing else; a sample rung
-    /// into its doorbell would wake it while it waits for a response), and from the calling thread placed as `client` (the motion node's place;
-    /// the bench listened above the graph before). Also returns the note on the placement.
+    /// into its doorbell would wake it while it waits for a response), and from the calling
+    /// thread placed as `client` (the motion node's place; the bench listened above the graph
+    /// before). Also returns the note on the placement.
     fn ik_round_trips(
         self,
         graph: &mut LiveGraph,

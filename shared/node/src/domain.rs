@@ -75,9 +75,9 @@ impl Domain {
     /// of 128 each made that scan the largest part of an empty receive. The buffers here hold at
     /// least as many departed senders as can be connected at once: twice the publishers of a
     /// subscriber and the servers of a client, the clients of a server (a sender that leaves
-    /// beyond that is dropped with its unread data, logged by iceoryx2). Alternated quick benches on the
-    /// development VM (2026-12-05): the IK round trip's transport part p50 8.7–9.5 µs against
-    /// 9.1–10.6 µs with the defaults.
+    /// beyond that is dropped with its unread data, logged by iceoryx2). Alternated quick
+    /// benches on the development VM (2026-12-05): the IK round trip's transport part p50
+    /// 8.7–9.5 µs against 9.1–10.6 µs with the defaults.
     pub fn iceoryx_config(&self) -> Config {
         let mut config = Config::default();
         // The prefix is at most 41 ASCII bytes, always a valid file name.
