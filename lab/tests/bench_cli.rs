@@ -19,6 +19,10 @@ const PACED_TRANSPORTS: [&str; 3] = ["uds", "doorbell", "futex"];
 const PACED_PAYLOADS: [&str; 3] = ["encoder-sample", "tracker-frame", "ik"];
 /// Round trips of a paced row here: the floor, since a tenth of `SAMPLES` is fewer.
 const PACED_SAMPLES: u64 = 20;
+/// The host's timer at the encoders' place: one wake-up a millisecond for the paced window
+/// (1 s with `--quick`).
+const TIMER_ROW: &str = "timer/encoders-tick";
+const TIMER_TICKS: u64 = 1_000;
 
 fn sabr_bench(args: &[&str]) -> (Output, u32) {
     let child = Command::new(env!("CARGO_BIN_EXE_sabr-lab"))
@@ -103,18 +107,22 @@ fn quick_baselines_measure_every_transport_and_payload() {
             expected_names.push(format!("{transport}-paced/{payload}"));
         }
     }
+    let paced = expected_names.len();
+    expected_names.push(TIMER_ROW.to_owned());
     let names: Vec<&str> = rows[1..].iter().map(|r| r[0].as_str()).collect();
     assert_eq!(names, expected_names);
     for (index, row) in rows[1..].iter().enumerate() {
         let count = if index < back_to_back {
             SAMPLES
-        } else {
+        } else if index < paced {
             PACED_SAMPLES
+        } else {
+            TIMER_TICKS
         };
         assert_eq!(row[1], "ns", "{row:?}");
         assert_eq!(row[2], count.to_string(), "{row:?}");
         let values: Vec<u64> = row[3..].iter().map(|v| v.parse().unwrap()).collect();
-        assert!(values[0] > 0, "a round trip of 0 ns: {row:?}");
+        assert!(values[0] > 0, "a p50 of 0 ns: {row:?}");
         assert!(
             values.windows(2).all(|w| w[0] <= w[1]),
             "percentiles not monotone: {row:?}"

@@ -292,6 +292,17 @@ fn placement_of(pid: u32) -> (String, u32, u32) {
     (cpus, field(41), field(40))
 }
 
+/// The `SABR_LOOP_PHASE_US` a process was started with, if any.
+fn loop_phase_of(pid: u32) -> Option<String> {
+    let environ = std::fs::read(format!("/proc/{pid}/environ")).unwrap();
+    environ.split(|&b| b == 0).find_map(|entry| {
+        let entry = std::str::from_utf8(entry).ok()?;
+        entry
+            .strip_prefix(&format!("{}=", sabr_node::LOOP_PHASE_ENV))
+            .map(str::to_owned)
+    })
+}
+
 #[test]
 fn nodes_run_with_their_cpu_set_and_scheduling_policy() {
     let toml = r#"
@@ -300,6 +311,7 @@ name = "pinned"
 exec = "sabr-test-node"
 cpus = [0]
 sched = "rr:3"
+phase_us = 250
 
 [[node]]
 name = "free"
@@ -315,6 +327,9 @@ exec = "sabr-test-node"
     let (cpus, policy, priority) = placement_of(free.pid);
     assert_eq!((policy, priority), (0, 0));
     assert_eq!(cpus, placement_of(std::process::id()).0);
+    // The loop phase reaches the node's runtime through its environment, only where given.
+    assert_eq!(loop_phase_of(pinned.pid).as_deref(), Some("250"));
+    assert_eq!(loop_phase_of(free.pid), None);
     let status = graph.interrupt(LONG).expect("launcher exits");
     assert!(status.success(), "{}", graph.output());
     assert_all_gone(&mut graph);
@@ -346,7 +361,10 @@ fn a_shipped_graph_checks_with_its_placement_and_without_it() {
     assert!(ok, "{stdout}{stderr}");
     assert!(stdout.contains("  motion ("), "{stdout}");
     assert!(
-        !stdout.contains("cpus =") && !stdout.contains("sched =") && !stdout.contains("latency"),
+        !stdout.contains("cpus =")
+            && !stdout.contains("sched =")
+            && !stdout.contains("phase_us")
+            && !stdout.contains("latency"),
         "--unplaced kept a placement: {stdout}"
     );
     // With its placement the graph either checks and shows it, or is refused with the way
@@ -358,6 +376,8 @@ fn a_shipped_graph_checks_with_its_placement_and_without_it() {
             "{stdout}"
         );
         assert!(stdout.contains("ik (") && stdout.contains("sched = \"fifo:45\""));
+        let motion = stdout.lines().find(|l| l.contains("motion (")).unwrap();
+        assert!(motion.ends_with(", phase_us = 700)"), "{motion}");
         assert!(
             stdout.contains("CPU wake-up latency held at ≤ 0 µs"),
             "{stdout}"

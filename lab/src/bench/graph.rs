@@ -53,12 +53,22 @@ pub fn stand_in_bin_dir() -> tempfile::TempDir {
 
 /// The placement `launch_file` gives `node` (executables looked up in `bin_dir`).
 pub fn placement_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Placement> {
+    Ok(node_of(launch_file, node, bin_dir)?.placement)
+}
+
+/// The phase (µs) `launch_file` gives the periodic loop of `node` (`phase_us`), if any.
+pub fn loop_phase_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<Option<u32>> {
+    Ok(node_of(launch_file, node, bin_dir)?.loop_phase_us)
+}
+
+/// The node `node` of `launch_file` as the launcher reads it (executables looked up in
+/// `bin_dir`).
+fn node_of(launch_file: &str, node: &str, bin_dir: &Path) -> anyhow::Result<spec::NodeSpec> {
     let graph = spec::parse(Path::new("bench graph"), launch_file, bin_dir)?;
     graph
         .nodes
-        .iter()
+        .into_iter()
         .find(|n| n.name == node)
-        .map(|n| n.placement.clone())
         .with_context(|| format!("the bench graph has no node {node}"))
 }
 

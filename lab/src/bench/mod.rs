@@ -22,6 +22,7 @@ pub mod pong;
 mod sensing;
 mod setpoints;
 mod stats;
+mod timer;
 mod uds;
 
 use anyhow::bail;
@@ -375,6 +376,7 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         });
         results.add(&name, ping_pong);
     }
+    measure_timer(settings, results);
     let left = sabr_node::release_domain(&domain);
     if !left.is_empty() {
         results.notes.push(format!(
@@ -382,6 +384,17 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
         ));
     }
     Ok(())
+}
+
+/// [`timer::TIMER_LATENESS`] at the encoders' rate and place, for as long as a paced
+/// baseline runs (under the wake-up latency bound the caller holds).
+fn measure_timer(settings: &Settings, results: &mut Results) {
+    settings.measuring(timer::TIMER_LATENESS);
+    let period = Duration::from_secs_f64(1.0 / sabr_node::msgs::ENCODER_RATE_HZ);
+    let ticks = (settings.paced_window.as_nanos() / period.as_nanos().max(1)) as u64;
+    let measured = graph::placement_of(graph::SHIPPED_LAUNCH_FILE, "encoders", &settings.bin_dir)
+        .and_then(|place| graph::placed(&place, || timer::lateness(ticks, period)));
+    results.add(timer::TIMER_LATENESS, measured.map(|m| vec![m]));
 }
 
 /// The two nodes of the live-graph hop a payload stands for (producer, consumer), placed as

@@ -36,6 +36,7 @@ use super::hops::{
 };
 use super::payload::{Payload, IK_PERIOD};
 use super::stats::{self, format_ns, Measurement};
+use super::timer;
 use anyhow::{bail, Context};
 use sabr_ik::IkClient;
 use sabr_launcher::placement::Placement;
@@ -43,7 +44,7 @@ use sabr_model::HOME_JOINTS;
 use sabr_node::msgs::{
     services, EncoderSample, IkRequest, IkStatus, MatchedSample, RigTruth, TrackerFrame,
 };
-use sabr_node::{monotonic_ns, Domain, Exit, NodeRuntime, Subscriber, Waitable};
+use sabr_node::{delay_to_phase, monotonic_ns, Domain, Exit, NodeRuntime, Subscriber, Waitable};
 use sabr_sim::{Session, SimConfig};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -161,6 +162,11 @@ pub fn run(
     probe.listen(&mut graph, &mut hops, plan.window)?;
     probe.listen_to_frames(&mut graph, &mut hops, plan.window / FRAMES_WINDOW_DIVISOR)?;
     let client = graph::placement_of(SHIPPED_LAUNCH_FILE, "motion", bin_dir)?;
+    let phase = graph::loop_phase_of(SHIPPED_LAUNCH_FILE, "motion", bin_dir)?;
+    let client = IkClientPlace {
+        placement: client,
+        phase: phase.map(|us| Duration::from_micros(u64::from(us))),
+    };
     let (ik, ik_note) = probe.ik_round_trips(&mut graph, &targets, plan, &client)?;
     graph.stop()?;
 
@@ -313,7 +319,8 @@ impl Probe {
     }
 
     /// Times IK requests to the graph's server as the motion node makes them, in bursts of
-    /// [`Payload::live_burst`] back to back, one burst per [`IK_PERIOD`]: after dropping the
+    /// [`Payload::live_burst`] back to back, one burst per [`IK_PERIOD`] (at the motion node's
+    /// loop phase on `CLOCK_MONOTONIC`, where the launch file gives one): after dropping the
     /// bench's subscriptions (the bench is then an IK client and nothing else; a sample rung
     /// into its doorbell would wake it while it waits for a response), and from the calling
     /// thread placed as `client` (the motion node's place; the bench listened above the graph
@@ -323,7 +330,7 @@ impl Probe {
         graph: &mut LiveGraph,
         targets: &[Target],
         plan: &Plan,
-        client: &Placement,
+        client: &IkClientPlace,
     ) -> anyhow::Result<(IkRoundTrips, String)> {
         let Probe {
             mut rt,
@@ -332,13 +339,23 @@ impl Probe {
             truth,
         } = self;
         drop((encoders, matched, truth));
+        let IkClientPlace {
+            placement: client,
+            phase,
+        } = client;
         let note = match client.probe() {
             Ok(()) => {
                 let prepared = client.prepare().map_err(anyhow::Error::msg)?;
                 prepared
                     .apply()
                     .with_context(|| format!("cannot place the bench's IK client: {client}"))?;
-                format!("the bench's IK client ran at {client}, as the motion node does")
+                let phase = phase.map_or(String::new(), |phase| {
+                    format!(
+                        ", its bursts {} µs into each millisecond",
+                        phase.as_micros()
+                    )
+                });
+                format!("the bench's IK client ran at {client}{phase}, as the motion node does")
             }
             Err(reason) => {
                 format!("the bench's IK client kept the listening thread's placement ({reason})")
@@ -348,15 +365,14 @@ impl Probe {
         let mut round_trips = IkRoundTrips::default();
         let warmup = plan.ik_warmup();
         let burst = Payload::Ik.live_burst();
-        let mut next = Instant::now();
+        // The bursts' grid: the motion node's phase, or wherever the first burst starts.
+        let period_ns = stats::duration_ns(IK_PERIOD) as i64;
+        let phase_ns = phase.map_or_else(monotonic_ns, |phase| stats::duration_ns(phase) as i64);
         for (index, target) in (0..warmup + plan.ik_requests).zip(targets.iter().cycle()) {
             let first = index.is_multiple_of(burst);
             if first {
-                let now = Instant::now();
-                if next > now {
-                    std::thread::sleep(next - now);
-                }
-                next = next.max(now) + IK_PERIOD;
+                let now = monotonic_ns();
+                timer::sleep_until(now + delay_to_phase(now, period_ns, phase_ns))?;
             }
             let request = IkRequest {
                 id: 0,
@@ -388,6 +404,12 @@ impl Probe {
         }
         Ok((round_trips, note))
     }
+}
+
+/// Where the bench's IK client runs: the motion node's placement, and its loop phase.
+struct IkClientPlace {
+    placement: Placement,
+    phase: Option<Duration>,
 }
 
 /// The IK round trips, their parts, and the first of each burst.
@@ -845,6 +867,11 @@ mod tests {
             for node in graph.nodes {
                 let same = shipped.nodes.iter().find(|n| n.name == node.name).unwrap();
                 assert_eq!(node.placement, same.placement, "{name}: {}", node.name);
+                assert_eq!(
+                    node.loop_phase_us, same.loop_phase_us,
+                    "{name}: {} loop phase",
+                    node.name
+                );
                 assert!(
                     node.placement.cpus.is_some(),
                     "{name}: {} is placed",
@@ -852,6 +879,44 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The shipped graphs' loop phases keep the motion node's bursts of IK requests clear of
+    /// every other timer on its core: the rig's two ticks a millisecond, the encoders' tick,
+    /// and the kernel's scheduler tick just after each whole millisecond (at any HZ up to
+    /// 1000), each with the time it takes to run.
+    #[test]
+    fn the_motion_nodes_bursts_fall_where_no_other_timer_does() {
+        const TICK_RUN_US: u32 = 60;
+        const BURST_US: u32 = 150;
+        let bin_dir = graph::stand_in_bin_dir();
+        let shipped =
+            sabr_launcher::spec::parse(Path::new("shipped"), SHIPPED_LAUNCH_FILE, bin_dir.path())
+                .unwrap();
+        let node = |name: &str| shipped.nodes.iter().find(|n| n.name == name).unwrap();
+        let phase = |name: &str| node(name).loop_phase_us.unwrap_or_else(|| panic!("{name}"));
+        let motion = phase("motion");
+        // Deadlines within each millisecond (µs): the rig ticks at 2 kHz; the scheduler
+        // tick also comes at the start of the next millisecond.
+        let rig = phase("rig") % 500;
+        let others = [0, rig, rig + 500, phase("encoders"), 1_000];
+        assert_eq!(node("motion").placement.cpus, node("rig").placement.cpus);
+        assert_eq!(
+            node("motion").placement.cpus,
+            node("encoders").placement.cpus
+        );
+        for other in others {
+            assert!(
+                motion >= other + TICK_RUN_US || motion + BURST_US <= other,
+                "motion's bursts at {motion}–{} µs meet a timer at {other} µs",
+                motion + BURST_US
+            );
+        }
+        // The encoders read the rig's latch after the rig made it.
+        assert!(
+            phase("encoders") >= rig + TICK_RUN_US,
+            "encoders before the rig's latch"
+        );
     }
 
     #[test]

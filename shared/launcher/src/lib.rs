@@ -100,7 +100,14 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
             } else {
                 format!(", {}", node.placement)
             };
-            println!("  {} ({}{placement})", node.name, node.exec.display());
+            let phase = node
+                .loop_phase_us
+                .map_or(String::new(), |phase| format!(", phase_us = {phase}"));
+            println!(
+                "  {} ({}{placement}{phase})",
+                node.name,
+                node.exec.display()
+            );
         }
         return Ok(ExitCode::SUCCESS);
     }

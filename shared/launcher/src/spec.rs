@@ -24,6 +24,9 @@
 //!                              # launcher's terminal (prefixed with the node's name)
 //! cpus = [0]                   # optional: the CPUs it may run on (sched_setaffinity)
 //! sched = "fifo:40"            # optional: "fifo:N" | "rr:N" (N = 1..=99) | "other"
+//! phase_us = 200               # optional: its periodic loop's deadlines fall this many µs
+//!                              # after each multiple of the loop's period on
+//!                              # CLOCK_MONOTONIC (modulo the period; 0..=999999)
 //! ```
 //!
 //! A placement (`cpus`, `sched`) is checked against the machine when the file is read and
@@ -100,6 +103,9 @@ pub struct NodeSpec {
     pub placement: Placement,
     /// Line of the launch file where the placement (or, without one, the node) is given.
     pub placement_line: usize,
+    /// Phase of the node's periodic loop on `CLOCK_MONOTONIC`, µs (env
+    /// `SABR_LOOP_PHASE_US`); `None`: the loop's schedule starts with its first call.
+    pub loop_phase_us: Option<u32>,
 }
 
 /// A validated graph: nodes in start order (every node after its dependencies).
@@ -158,6 +164,7 @@ struct NodeToml {
     console: bool,
     cpus: Option<Spanned<Vec<usize>>>,
     sched: Option<Spanned<String>>,
+    phase_us: Option<Spanned<u32>>,
 }
 
 fn default_max_restarts() -> u32 {
@@ -222,6 +229,19 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             None => None,
         };
         let (placement, placement_line) = node_placement(node, text, &at)?;
+        let loop_phase_us = match &node.phase_us {
+            Some(phase) if *phase.get_ref() > sabr_node::MAX_LOOP_PHASE_US => {
+                return Err(at(
+                    phase.span(),
+                    format!(
+                        "phase_us = {}: must be below one second (at most {})",
+                        phase.get_ref(),
+                        sabr_node::MAX_LOOP_PHASE_US
+                    ),
+                ));
+            }
+            phase => phase.as_ref().map(|phase| *phase.get_ref()),
+        };
         nodes.push(NodeSpec {
             name: name.clone(),
             exec,
@@ -241,6 +261,7 @@ pub fn parse(file: &Path, text: &str, bin_dir: &Path) -> Result<GraphSpec, Launc
             console: node.console,
             placement,
             placement_line,
+            loop_phase_us,
         });
     }
     for entry in &parsed.node {
@@ -314,11 +335,12 @@ fn node_placement(
 }
 
 impl GraphSpec {
-    /// Leaves every node's placement and the CPUs' wake-up latency to the system.
+    /// Leaves every node's placement, loop phase and the CPUs' wake-up latency to the system.
     pub fn remove_placement(&mut self) {
         self.cpu_wake_latency = None;
         for node in &mut self.nodes {
             node.placement = Placement::default();
+            node.loop_phase_us = None;
         }
     }
 }
@@ -568,12 +590,14 @@ exec = "a"
     fn a_graph_without_its_placement_is_left_to_the_system() {
         let mut spec = check(
             "[graph]\ncpu_wake_latency_us = 0\n[[node]]\nname = \"x\"\nexec = \"a\"\n\
-             cpus = [0]\nsched = \"fifo:40\"\n",
+             cpus = [0]\nsched = \"fifo:40\"\nphase_us = 300\n",
         )
         .unwrap();
+        assert_eq!(spec.nodes[0].loop_phase_us, Some(300));
         spec.remove_placement();
         assert_eq!(spec.cpu_wake_latency, None);
         assert!(spec.nodes[0].placement.is_default());
+        assert_eq!(spec.nodes[0].loop_phase_us, None);
         assert_eq!(check_placements(&spec), Ok(()));
     }
 
@@ -597,6 +621,19 @@ exec = "a"
         assert_eq!((e.line, e.column), (4, 9));
         assert!(e.reason.contains("fifo:200"), "{e}");
         let e = error("[[node]]\nname = \"x\"\nexec = \"a\"\ncpus = [-1]\n");
+        assert_eq!(e.line, 4);
+    }
+
+    #[test]
+    fn a_loop_phase_is_whole_microseconds_below_one_second() {
+        let node = "[[node]]\nname = \"x\"\nexec = \"a\"\n";
+        assert_eq!(check(node).unwrap().nodes[0].loop_phase_us, None);
+        let spec = check(&format!("{node}phase_us = 999999\n")).unwrap();
+        assert_eq!(spec.nodes[0].loop_phase_us, Some(999_999));
+        let e = error(&format!("{node}phase_us = 1000000\n"));
+        assert_eq!((e.line, e.column), (4, 12));
+        assert!(e.reason.contains("below one second"), "{e}");
+        let e = error(&format!("{node}phase_us = 2.5\n"));
         assert_eq!(e.line, 4);
     }
 

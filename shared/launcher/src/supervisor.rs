@@ -7,7 +7,7 @@ use crate::spec::{GraphSpec, NodeSpec, RestartPolicy, MAX_BACKOFF};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_node::msgs::LifecycleState;
-use sabr_node::{Domain, GraphObserver, DOMAIN_ENV, NODE_NAME_ENV, RUN_DIR_ENV};
+use sabr_node::{Domain, GraphObserver, DOMAIN_ENV, LOOP_PHASE_ENV, NODE_NAME_ENV, RUN_DIR_ENV};
 use std::io::{BufRead, Write};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Child, ChildStdout, Command, ExitStatus, Stdio};
@@ -422,6 +422,10 @@ impl<'a> Supervisor<'a> {
             .env(DOMAIN_ENV, self.domain.as_str())
             .env(NODE_NAME_ENV, &spec.name)
             .env(RUN_DIR_ENV, self.run.path())
+            .envs(
+                spec.loop_phase_us
+                    .map(|phase| (LOOP_PHASE_ENV, phase.to_string())),
+            )
             .stdin(Stdio::null())
             .stdout(if spec.console {
                 Stdio::piped()

@@ -57,11 +57,11 @@ pub use message::Message;
 pub use observer::GraphObserver;
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{
-    run_dir, termination_requested, validate_node_name, Exit, LoopCtx, NodeRuntime,
-    HEARTBEAT_PERIOD, NODE_NAME_ENV, RUN_DIR_ENV,
+    parse_loop_phase, run_dir, termination_requested, validate_node_name, Exit, LoopCtx,
+    NodeRuntime, HEARTBEAT_PERIOD, LOOP_PHASE_ENV, MAX_LOOP_PHASE_US, NODE_NAME_ENV, RUN_DIR_ENV,
 };
 pub use service::{in_run_dir, service_main, StallWatch, StatusTimer, STATUS_PERIOD};
-pub use time::monotonic_ns;
+pub use time::{delay_to_phase, monotonic_ns};
 pub use transport::{Transport, Waitable};
 
 /// The iceoryx2 crate this runtime is built on, for direct use of what the helpers lack.
@@ -87,6 +87,14 @@ pub enum NodeError {
         name: String,
         /// Why it was rejected.
         reason: String,
+    },
+    /// The loop phase given by the launcher is not usable.
+    #[error("invalid loop phase {value:?} (env SABR_LOOP_PHASE_US): {reason}")]
+    InvalidLoopPhase {
+        /// The rejected value.
+        value: String,
+        /// Why it was rejected.
+        reason: &'static str,
     },
     /// The iceoryx2 node could not be created.
     #[error("cannot create the iceoryx2 node: {0}")]

@@ -18,6 +18,12 @@ use std::time::{Duration, Instant};
 pub const NODE_NAME_ENV: &str = "SABR_NODE_NAME";
 /// Environment variable holding the run directory `runs/<id>` (set by the launcher).
 pub const RUN_DIR_ENV: &str = "SABR_RUN_DIR";
+/// Environment variable holding the phase of the node's periodic loop in µs (set by the
+/// launcher from the node's `phase_us`): [`NodeRuntime::run_loop`] then keeps its deadlines
+/// that long after each multiple of its period on `CLOCK_MONOTONIC`.
+pub const LOOP_PHASE_ENV: &str = "SABR_LOOP_PHASE_US";
+/// Largest loop phase accepted, µs (one second, the longest period a node loops at).
+pub const MAX_LOOP_PHASE_US: u32 = 999_999;
 /// How often a running node repeats its `Ready` lifecycle announcement (its heartbeat).
 pub const HEARTBEAT_PERIOD: Duration = Duration::from_millis(100);
 /// Publisher capacity of the lifecycle service: one per node process plus spares for restarts.
@@ -31,6 +37,22 @@ pub(crate) const LIFECYCLE_BUFFER: usize = 256;
 /// write; `None` when the process was started by hand without it.
 pub fn run_dir() -> Option<PathBuf> {
     std::env::var_os(RUN_DIR_ENV).map(PathBuf::from)
+}
+
+/// A loop phase as [`LOOP_PHASE_ENV`] gives it: whole µs, 0..=[`MAX_LOOP_PHASE_US`].
+pub fn parse_loop_phase(value: &str) -> Result<Duration, NodeError> {
+    let invalid = |reason| NodeError::InvalidLoopPhase {
+        value: value.to_owned(),
+        reason,
+    };
+    let us: u32 = value
+        .trim()
+        .parse()
+        .map_err(|_| invalid("not a whole number of µs"))?;
+    if us > MAX_LOOP_PHASE_US {
+        return Err(invalid("must be below one second (999999 µs at most)"));
+    }
+    Ok(Duration::from_micros(u64::from(us)))
 }
 
 /// True once SIGINT or SIGTERM arrived (what [`NodeRuntime::keep_running`] looks at), for
@@ -156,6 +178,7 @@ pub struct NodeRuntime<S: Transport = Doorbell> {
     state: LifecycleState,
     last_heartbeat: Instant,
     stop_requested: bool,
+    loop_phase: Option<Duration>,
 }
 
 impl NodeRuntime<Doorbell> {
@@ -179,7 +202,13 @@ impl<S: Transport> NodeRuntime<S> {
     pub fn start_on(default_name: &str) -> Result<Self, NodeError> {
         crate::init_tracing();
         let name = std::env::var(NODE_NAME_ENV).unwrap_or_else(|_| default_name.to_owned());
-        Self::in_domain(&name, Domain::from_env()?)
+        let loop_phase = match std::env::var(LOOP_PHASE_ENV) {
+            Ok(value) => Some(parse_loop_phase(&value)?),
+            Err(_) => None,
+        };
+        let mut runtime = Self::in_domain(&name, Domain::from_env()?)?;
+        runtime.set_loop_phase(loop_phase);
+        Ok(runtime)
     }
 
     /// [`NodeRuntime::with_domain`] on transport `S`.
@@ -225,6 +254,7 @@ impl<S: Transport> NodeRuntime<S> {
             state: LifecycleState::Starting,
             last_heartbeat: Instant::now(),
             stop_requested,
+            loop_phase: None,
         };
         runtime.announce(LifecycleState::Starting);
         tracing::info!(node = name, domain = %runtime.domain, pid = std::process::id(), "starting");
@@ -342,9 +372,19 @@ impl<S: Transport> NodeRuntime<S> {
         !self.stop_requested
     }
 
+    /// Sets the phase of [`NodeRuntime::run_loop`]'s deadlines (see [`LOOP_PHASE_ENV`]);
+    /// `None` starts the schedule at the loop's first call instead.
+    pub fn set_loop_phase(&mut self, phase: Option<Duration>) {
+        self.loop_phase = phase;
+    }
+
     /// Calls `body` every `period` (drift-free schedule; when the body overruns, missed
     /// periods are skipped, not bunched) until a signal arrives or the body stops the loop.
-    /// A zero period calls it back to back: a body paced by a device it waits for.
+    /// With a loop phase (see [`NodeRuntime::set_loop_phase`]) the calls fall that long
+    /// after each multiple of `period` on `CLOCK_MONOTONIC` (the phase taken modulo the
+    /// period), so periodic nodes sharing a core wake at the times the launch file gives them
+    /// rather than wherever their start left them. A zero period calls it back to back: a
+    /// body paced by a device it waits for.
     pub fn run_loop<E>(
         &mut self,
         period: Duration,
@@ -353,6 +393,14 @@ impl<S: Transport> NodeRuntime<S> {
         self.ready();
         let mut ctx = LoopCtx::new();
         let mut next = Instant::now();
+        if let Some(phase) = self.loop_phase.filter(|_| !period.is_zero()) {
+            let delay = crate::delay_to_phase(
+                monotonic_ns(),
+                i64::try_from(period.as_nanos()).unwrap_or(i64::MAX),
+                i64::try_from(phase.as_nanos()).unwrap_or(0),
+            );
+            next += Duration::from_nanos(delay.unsigned_abs());
+        }
         loop {
             let now = Instant::now();
             if next > now && !self.sleep(next - now) {

@@ -1,4 +1,4 @@
-//! The host clock every message time stamp uses.
+//! The host clock every message time stamp uses, and the grid periodic loops keep on it.
 
 use nix::time::{clock_gettime, ClockId};
 
@@ -10,9 +10,31 @@ pub fn monotonic_ns() -> i64 {
         .unwrap_or(0)
 }
 
+/// Time (ns) from `now_ns` to the next instant `t ≥ now_ns` of `CLOCK_MONOTONIC` with
+/// `t ≡ phase_ns (mod period_ns)`: where a loop of that period and phase has its next
+/// deadline. The phase is taken modulo the period; a non-positive period gives 0.
+pub fn delay_to_phase(now_ns: i64, period_ns: i64, phase_ns: i64) -> i64 {
+    if period_ns <= 0 {
+        return 0;
+    }
+    (phase_ns - now_ns).rem_euclid(period_ns)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_next_deadline_on_the_grid_is_never_in_the_past() {
+        // Period 1 ms, phase 300 µs.
+        assert_eq!(delay_to_phase(5_000_000, 1_000_000, 300_000), 300_000);
+        assert_eq!(delay_to_phase(5_300_000, 1_000_000, 300_000), 0);
+        assert_eq!(delay_to_phase(5_300_001, 1_000_000, 300_000), 999_999);
+        assert_eq!(delay_to_phase(5_900_000, 1_000_000, 300_000), 400_000);
+        // The phase modulo the period: 600 µs on a 500 µs grid is 100 µs.
+        assert_eq!(delay_to_phase(1_000_000, 500_000, 600_000), 100_000);
+        assert_eq!(delay_to_phase(1_000_000, 0, 600_000), 0);
+    }
 
     #[test]
     fn is_monotonic_and_advances_with_std_clock() {

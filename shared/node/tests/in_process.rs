@@ -271,3 +271,54 @@ fn run_on_data_tells_which_inputs_rang_on_the_doorbell() {
 fn run_on_data_tells_which_inputs_rang_on_iceoryx2_events() {
     run_on_data_tells_which_inputs_rang::<sabr_node::iceoryx2::prelude::ipc::Service>("rang-ipc");
 }
+
+/// With a loop phase, the periodic loop's calls fall that long after each multiple of its
+/// period on `CLOCK_MONOTONIC`, whenever the loop starts. (A call can come late on a busy
+/// machine, never early: the median offset from the phase is well inside the period.)
+#[test]
+fn run_loop_keeps_the_phase_it_is_given() {
+    let domain = unique_domain("phase");
+    let mut rt = NodeRuntime::with_domain("periodic", domain.clone()).unwrap();
+    let period_ns = 20_000_000;
+    let phase_ns = 7_000_000;
+    rt.set_loop_phase(Some(Duration::from_nanos(phase_ns)));
+    let mut offsets = Vec::new();
+    let exit = rt
+        .run_loop(Duration::from_nanos(period_ns), |ctx| {
+            let now = sabr_node::monotonic_ns();
+            offsets.push((now - phase_ns as i64).rem_euclid(period_ns as i64));
+            if ctx.tick() == 10 {
+                ctx.stop();
+            }
+            Ok::<_, std::convert::Infallible>(())
+        })
+        .unwrap();
+    assert_eq!(exit, Exit::Stopped);
+    offsets.sort_unstable();
+    let median = offsets[offsets.len() / 2];
+    assert!(
+        median < period_ns as i64 / 4,
+        "calls {median} ns after the phase (period {period_ns} ns): {offsets:?}"
+    );
+    drop(rt);
+    release(&domain);
+}
+
+#[test]
+fn a_loop_phase_from_the_launcher_is_whole_microseconds_below_one_second() {
+    assert_eq!(
+        sabr_node::parse_loop_phase("300").unwrap(),
+        Duration::from_micros(300)
+    );
+    assert_eq!(
+        sabr_node::parse_loop_phase("999999").unwrap(),
+        Duration::from_micros(999_999)
+    );
+    for bad in ["1000000", "-5", "2.5", "", "soon"] {
+        let error = sabr_node::parse_loop_phase(bad).unwrap_err().to_string();
+        assert!(
+            error.contains("SABR_LOOP_PHASE_US") && error.contains(&format!("{bad:?}")),
+            "{error}"
+        );
+    }
+}
