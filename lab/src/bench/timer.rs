@@ -9,7 +9,7 @@
 use super::stats::Measurement;
 use anyhow::Context;
 use rustix::thread::{clock_nanosleep_absolute, ClockId, Timespec};
-use sabr_node::monotonic_ns;
+use sabr_node::{delay_to_phase, monotonic_ns};
 use std::time::Duration;
 
 /// Lateness of each wake-up after its deadline (ns), the thread placed as the encoders.
@@ -46,15 +46,11 @@ pub(super) fn sleep_until(due_ns: i64) -> anyhow::Result<()> {
     }
 }
 
-/// The deadline after `due_ns` for a wake-up at `woke_ns`: one period on, or the first one
-/// still ahead when the wake-up came a whole period or more late.
+/// The deadline after `due_ns` for a wake-up at `woke_ns`: the first one on the grid of
+/// `due_ns` still ahead (one period on, or more when the wake-up came a whole period late).
 fn next_deadline(due_ns: i64, woke_ns: i64, period_ns: i64) -> i64 {
-    let next = due_ns + period_ns;
-    if woke_ns < next {
-        next
-    } else {
-        next + ((woke_ns - next) / period_ns + 1) * period_ns
-    }
+    let after = woke_ns + 1;
+    after + delay_to_phase(after, period_ns, due_ns)
 }
 
 #[cfg(test)]
