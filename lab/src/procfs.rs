@@ -3,13 +3,14 @@
 
 use anyhow::{bail, Context};
 use nix::unistd::{sysconf, SysconfVar};
+use sabr_launcher::wake_latency::IDLE_POLL_THREAD_PREFIX;
 
 /// One reading of a process's resident memory and CPU time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ProcReading {
     /// Resident set size (`VmRSS`), KiB.
     pub rss_kib: u64,
-    /// User + system CPU time of all its threads so far, clock ticks.
+    /// User + system CPU time of its threads so far, clock ticks, as [`cpu_ticks`] counts it.
     pub cpu_ticks: u64,
 }
 
@@ -23,15 +24,37 @@ pub fn read(pid: u32) -> anyhow::Result<ProcReading> {
         std::fs::read_to_string(&stat_path).with_context(|| format!("cannot read {stat_path}"))?;
     Ok(ProcReading {
         rss_kib: parse_vm_rss_kib(&status).with_context(|| status_path.clone())?,
-        cpu_ticks: parse_cpu_ticks(&stat).with_context(|| stat_path.clone())?,
+        cpu_ticks: parse_cpu_ticks(&stat)
+            .with_context(|| stat_path.clone())?
+            .saturating_sub(idle_polling_ticks(pid)),
     })
 }
 
-/// User + system CPU time of process `pid` so far, in clock ticks (`sysconf(CLK_TCK)` per s).
+/// User + system CPU time of process `pid` so far, in clock ticks (`sysconf(CLK_TCK)` per s),
+/// without its threads polling idle CPUs for a held wake-up latency bound
+/// ([`IDLE_POLL_THREAD_PREFIX`]): their time is the CPUs' idle time, not the process's work.
 pub fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
     let path = format!("/proc/{pid}/stat");
     let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
-    parse_cpu_ticks(&text).with_context(|| format!("{path}: unexpected content"))
+    let ticks = parse_cpu_ticks(&text).with_context(|| format!("{path}: unexpected content"))?;
+    Ok(ticks.saturating_sub(idle_polling_ticks(pid)))
+}
+
+/// User + system CPU time of the threads of `pid` named [`IDLE_POLL_THREAD_PREFIX`]…, clock
+/// ticks (0 without any; a thread that ends while it is read is not counted).
+pub fn idle_polling_ticks(pid: u32) -> u64 {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return 0;
+    };
+    tasks
+        .filter_map(Result::ok)
+        .filter(|task| {
+            std::fs::read_to_string(task.path().join("comm"))
+                .is_ok_and(|name| name.starts_with(IDLE_POLL_THREAD_PREFIX))
+        })
+        .filter_map(|task| std::fs::read_to_string(task.path().join("stat")).ok())
+        .filter_map(|stat| parse_cpu_ticks(&stat).ok())
+        .sum()
 }
 
 /// Clock ticks per second of the `/proc` CPU times (`sysconf(CLK_TCK)`).
@@ -99,6 +122,39 @@ mod tests {
         assert!(parse_cpu_ticks("4242 x S 1 2 3 4 5 6 7 8 9 10 11 12 13").is_err());
         let error = parse_cpu_ticks("1 (x) S 1 1 1 0 -1 0 0 0 0 0 u 5 0").unwrap_err();
         assert!(format!("{error:#}").contains("field 14"), "{error:#}");
+    }
+
+    #[test]
+    fn threads_polling_idle_cpus_are_left_out_of_the_cpu_time() {
+        let pid = std::process::id();
+        let total = || parse_cpu_ticks(&std::fs::read_to_string("/proc/self/stat").unwrap());
+        let (spun_tx, spun_rx) = std::sync::mpsc::channel();
+        let (end_tx, end_rx) = std::sync::mpsc::channel::<()>();
+        let poller = std::thread::Builder::new()
+            .name(format!("{IDLE_POLL_THREAD_PREFIX}0"))
+            .spawn(move || {
+                // Spin until this thread has used some ticks, then hold them still.
+                let started = std::time::Instant::now();
+                while idle_polling_ticks(pid) < 5 && started.elapsed().as_secs() < 20 {
+                    std::hint::spin_loop();
+                }
+                spun_tx.send(()).unwrap();
+                let _ = end_rx.recv();
+            })
+            .unwrap();
+        spun_rx.recv().unwrap();
+        let polling = idle_polling_ticks(pid);
+        assert!(polling >= 5, "the polling thread used {polling} ticks");
+        let before = total().unwrap();
+        let work = cpu_ticks(pid).unwrap();
+        let after = total().unwrap();
+        assert!(
+            (before..=after).contains(&(work + polling)),
+            "work {work} + polling {polling} outside the process's {before}..={after} ticks"
+        );
+        assert_eq!(idle_polling_ticks(u32::MAX), 0);
+        end_tx.send(()).unwrap();
+        poller.join().unwrap();
     }
 
     #[test]

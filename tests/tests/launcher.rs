@@ -1,9 +1,12 @@
 //! The launcher running real processes: dependency order and readiness, restart after
-//! SIGKILL, required nodes, the stop ladder, the done signal, and launch-file errors.
+//! SIGKILL, required nodes, the stop ladder, the done signal, launch-file errors, placement
+//! and the idle CPUs' polling.
 
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use sabr_integration_tests::{process_alive, LaunchedGraph};
+use sabr_launcher::placement::Placement;
+use sabr_launcher::wake_latency::{IdleLoop, WakeLatencyBound, IDLE_POLL_THREAD_PREFIX};
 use sabr_msgs::{services, EncoderSample, LifecycleState};
 use sabr_node::iceoryx2::node::{Node, NodeState};
 use sabr_node::iceoryx2::prelude::CallbackProgression;
@@ -278,14 +281,20 @@ fn a_malformed_launch_file_is_rejected_with_file_line_and_reason() {
 /// `Cpus_allowed_list` and the scheduling policy and real-time priority (`/proc/<pid>/stat`
 /// fields 41 and 40) of a process.
 fn placement_of(pid: u32) -> (String, u32, u32) {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+    placement_of_task(pid, pid)
+}
+
+/// [`placement_of`] one thread `tid` of process `pid`.
+fn placement_of_task(pid: u32, tid: u32) -> (String, u32, u32) {
+    let task = format!("/proc/{pid}/task/{tid}");
+    let status = std::fs::read_to_string(format!("{task}/status")).unwrap();
     let cpus = status
         .lines()
         .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
         .unwrap()
         .trim()
         .to_owned();
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let stat = std::fs::read_to_string(format!("{task}/stat")).unwrap();
     // Fields after the command name, which ends with the last ')': field 3 is first.
     let fields: Vec<&str> = stat[stat.rfind(')').unwrap() + 2..].split(' ').collect();
     let field = |n: usize| fields[n - 3].parse::<u32>().unwrap();
@@ -335,6 +344,63 @@ exec = "sabr-test-node"
     assert_all_gone(&mut graph);
 }
 
+/// The CPUs the threads of `pid` polling idle CPUs are named after, ascending, each checked
+/// to be confined to that CPU at `SCHED_IDLE` (policy 5).
+fn idle_polled_cpus(pid: u32) -> Vec<usize> {
+    let mut cpus = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).unwrap() {
+        let task = task.unwrap().path();
+        let name = std::fs::read_to_string(task.join("comm")).unwrap();
+        let Some(cpu) = name.trim().strip_prefix(IDLE_POLL_THREAD_PREFIX) else {
+            continue;
+        };
+        let tid: u32 = task.file_name().unwrap().to_str().unwrap().parse().unwrap();
+        let (allowed, policy, _) = placement_of_task(pid, tid);
+        assert_eq!(
+            (allowed.as_str(), policy),
+            (cpu, 5),
+            "thread {}",
+            name.trim()
+        );
+        cpus.push(cpu.parse().unwrap());
+    }
+    cpus.sort_unstable();
+    cpus
+}
+
+#[test]
+fn idle_cpus_are_polled_by_the_launcher_where_the_kernel_would_halt_them() {
+    let toml =
+        "[graph]\ncpu_wake_latency_us = 0\n\n[[node]]\nname = \"a\"\nexec = \"sabr-test-node\"\n";
+    let mut graph = LaunchedGraph::start("idle-poll", toml, &[], true);
+    if let Err(reason) = WakeLatencyBound::check() {
+        // Refused before any node starts, naming the device and the way out.
+        let status = graph.wait_exit(LONG).expect("launcher exits");
+        assert!(!status.success());
+        let output = graph.output();
+        assert!(
+            output.contains(&reason) && output.contains("--unplaced"),
+            "{output}"
+        );
+        return;
+    }
+    graph.wait_ready("a", None, LONG).expect("a ready");
+    let expected = match IdleLoop::of_this_kernel().obeys_zero_bound() {
+        true => Vec::new(),
+        false => Placement::unplaced().unwrap().cpus.unwrap(),
+    };
+    assert_eq!(idle_polled_cpus(graph.launcher_pid()), expected);
+    let status = graph.interrupt(LONG).expect("launcher exits");
+    assert!(status.success(), "{}", graph.output());
+    assert_eq!(
+        graph.output().contains("polling idle CPUs"),
+        !expected.is_empty(),
+        "{}",
+        graph.output()
+    );
+    assert_all_gone(&mut graph);
+}
+
 #[test]
 fn a_shipped_graph_checks_with_its_placement_and_without_it() {
     let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -380,6 +446,11 @@ fn a_shipped_graph_checks_with_its_placement_and_without_it() {
         assert!(motion.ends_with(", phase_us = 700)"), "{motion}");
         assert!(
             stdout.contains("CPU wake-up latency held at ≤ 0 µs"),
+            "{stdout}"
+        );
+        assert_eq!(
+            stdout.contains("the launcher polls idle CPUs itself"),
+            !IdleLoop::of_this_kernel().obeys_zero_bound(),
             "{stdout}"
         );
     } else {

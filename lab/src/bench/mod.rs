@@ -309,9 +309,17 @@ fn run_baselines(settings: &Settings, results: &mut Results) -> anyhow::Result<(
     let _bound = match graph::wake_latency_of(graph::SENSING_LAUNCH_FILE, &settings.bin_dir)? {
         Some(latency_us) => match WakeLatencyBound::hold(latency_us) {
             Ok(bound) => {
+                let polled = match bound.polled_cpus() {
+                    [] => String::new(),
+                    cpus => format!(
+                        " (this kernel has no cpuidle driver to obey it: CPUs {cpus:?} were \
+                         polled by SCHED_IDLE threads, in the baselines and by the launcher in \
+                         the graphs; their time is left out of the CPU figures)"
+                    ),
+                };
                 results.notes.push(format!(
                     "the ping-pong baselines ran with the CPUs' wake-up latency held at ≤ \
-                     {latency_us} µs, as the shipped graphs hold it"
+                     {latency_us} µs, as the shipped graphs hold it{polled}"
                 ));
                 Some(bound)
             }

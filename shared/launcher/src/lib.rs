@@ -31,7 +31,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 use steal::CpuTimes;
 use supervisor::Supervisor;
-use wake_latency::WakeLatencyBound;
+use wake_latency::{IdleLoop, WakeLatencyBound};
 
 /// Arguments of `sabr launch`.
 #[derive(Debug, Clone, clap::Args)]
@@ -59,6 +59,46 @@ pub struct LaunchArgs {
     /// bound is not allowed. The graph works the same, with less predictable latency.
     #[arg(long)]
     pub unplaced: bool,
+}
+
+/// Prints what `sabr launch --check` shows: the graph's start order with each node's placement
+/// and loop phase, and the CPU wake-up latency bound. A closed standard output (`| head`) ends
+/// the listing quietly.
+fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut text = format!("{}: valid; start order:\n", args.file.display());
+    if let Some((latency_us, _)) = graph.cpu_wake_latency {
+        let polled = match latency_us == 0 && !IdleLoop::of_this_kernel().obeys_zero_bound() {
+            true => "; this kernel has no cpuidle driver: the launcher polls idle CPUs itself",
+            false => "",
+        };
+        let _ = writeln!(
+            text,
+            "  (CPU wake-up latency held at ≤ {latency_us} µs while it runs{polled})"
+        );
+    }
+    for node in &graph.nodes {
+        let placement = if node.placement.is_default() {
+            String::new()
+        } else {
+            format!(", {}", node.placement)
+        };
+        let phase = node
+            .loop_phase_us
+            .map_or(String::new(), |phase| format!(", phase_us = {phase}"));
+        let _ = writeln!(
+            text,
+            "  {} ({}{placement}{phase})",
+            node.name,
+            node.exec.display()
+        );
+    }
+    match std::io::Write::write_all(&mut std::io::stdout().lock(), text.as_bytes()) {
+        Err(error) if error.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(error).context("cannot write the start order to standard output")
+        }
+        _ => Ok(()),
+    }
 }
 
 /// The directory of the node executables: `dir` when given, else the directory of the running
@@ -90,25 +130,7 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
         anyhow::anyhow!("{error}\n(or add --unplaced to run the graph without its placement)")
     })?;
     if args.check {
-        println!("{}: valid; start order:", args.file.display());
-        if let Some((latency_us, _)) = graph.cpu_wake_latency {
-            println!("  (CPU wake-up latency held at ≤ {latency_us} µs while it runs)");
-        }
-        for node in &graph.nodes {
-            let placement = if node.placement.is_default() {
-                String::new()
-            } else {
-                format!(", {}", node.placement)
-            };
-            let phase = node
-                .loop_phase_us
-                .map_or(String::new(), |phase| format!(", phase_us = {phase}"));
-            println!(
-                "  {} ({}{placement}{phase})",
-                node.name,
-                node.exec.display()
-            );
-        }
+        print_start_order(args, &graph)?;
         return Ok(ExitCode::SUCCESS);
     }
     let duration = match args.duration {
@@ -143,6 +165,13 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
             "sabr launch: CPU wake-up latency held at ≤ {} µs while the graph runs",
             bound.latency_us
         );
+        if !bound.polled_cpus().is_empty() {
+            eprintln!(
+                "sabr launch: this kernel has no cpuidle driver to obey it: polling idle CPUs \
+                 {:?} from the launcher (SCHED_IDLE threads)",
+                bound.polled_cpus()
+            );
+        }
     }
     let cpu_at_start = CpuTimes::now().ok();
     let mut supervisor = Supervisor::new(&graph, &run, domain.clone(), duration)?;

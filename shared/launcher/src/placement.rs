@@ -1,5 +1,5 @@
 //! Where and how a node runs: its CPU set (`cpus = [0]`) and scheduling policy
-//! (`sched = "fifo:40"`, `"rr:20"`, `"other"`), checked when the launch file is read, probed
+//! (`sched = "fifo:40"`, `"rr:20"`, `"other"`, `"idle"`), checked when the launch file is read, probed
 //! before any node starts, and applied in the child between fork and exec.
 
 use nix::sched::CpuSet;
@@ -14,14 +14,19 @@ pub enum Sched {
     RoundRobin(u8),
     /// `SCHED_OTHER`: the normal time-shared policy (priority 0).
     Other,
+    /// `SCHED_IDLE`: runs only when nothing else on its CPU wants to (priority 0).
+    Idle,
 }
 
 impl Sched {
-    /// Parses `fifo:N`, `rr:N` (N in 1..=99) or `other`.
+    /// Parses `fifo:N`, `rr:N` (N in 1..=99), `other` or `idle`.
     pub fn parse(text: &str) -> Result<Self, String> {
-        let expected = "expected \"fifo:N\", \"rr:N\" (N a real-time priority 1..=99) or \"other\"";
-        if text == "other" {
-            return Ok(Sched::Other);
+        let expected = "expected \"fifo:N\", \"rr:N\" (N a real-time priority 1..=99), \
+                        \"other\" or \"idle\"";
+        match text {
+            "other" => return Ok(Sched::Other),
+            "idle" => return Ok(Sched::Idle),
+            _ => {}
         }
         let (policy, priority) = text
             .split_once(':')
@@ -40,11 +45,11 @@ impl Sched {
         }
     }
 
-    /// The real-time priority (0 for `other`).
+    /// The real-time priority (0 for `other` and `idle`).
     pub fn priority(self) -> u8 {
         match self {
             Sched::Fifo(p) | Sched::RoundRobin(p) => p,
-            Sched::Other => 0,
+            Sched::Other | Sched::Idle => 0,
         }
     }
 
@@ -53,6 +58,7 @@ impl Sched {
             Sched::Fifo(_) => libc::SCHED_FIFO,
             Sched::RoundRobin(_) => libc::SCHED_RR,
             Sched::Other => libc::SCHED_OTHER,
+            Sched::Idle => libc::SCHED_IDLE,
         }
     }
 }
@@ -63,6 +69,7 @@ impl fmt::Display for Sched {
             Sched::Fifo(p) => write!(f, "fifo:{p}"),
             Sched::RoundRobin(p) => write!(f, "rr:{p}"),
             Sched::Other => write!(f, "other"),
+            Sched::Idle => write!(f, "idle"),
         }
     }
 }
@@ -163,14 +170,16 @@ impl Placement {
             .join()
             .map_err(|_| "the placement probe thread panicked".to_owned())?;
         result.map_err(|error| match (error, sched) {
-            (nix::errno::Errno::EPERM, Some(sched)) if sched != Sched::Other => format!(
+            (nix::errno::Errno::EPERM, Some(sched @ (Sched::Fifo(_) | Sched::RoundRobin(_)))) => {
+                format!(
                 "sched = \"{sched}\" is not allowed here ({error}): real-time scheduling needs \
                  CAP_SYS_NICE (run the launcher as root, or `setcap cap_sys_nice+ep` on it) or \
                  a real-time priority limit of at least {p} (`ulimit -r {p}`, or `@group - \
                  rtprio {p}` in /etc/security/limits.conf), and a cgroup with a real-time \
                  budget (cpu.rt_runtime_us > 0)",
                 p = sched.priority()
-            ),
+            )
+            }
             (error, _) => format!("cannot apply the placement ({error}): {self}"),
         })
     }
@@ -258,12 +267,14 @@ mod tests {
         assert_eq!(Sched::parse("fifo:40"), Ok(Sched::Fifo(40)));
         assert_eq!(Sched::parse("rr:1"), Ok(Sched::RoundRobin(1)));
         assert_eq!(Sched::parse("other"), Ok(Sched::Other));
+        assert_eq!(Sched::parse("idle"), Ok(Sched::Idle));
         for bad in [
             "fifo", "fifo:0", "fifo:100", "rr:-3", "idle:5", "FIFO:40", "",
         ] {
             assert!(Sched::parse(bad).is_err(), "{bad:?}");
         }
         assert_eq!(Sched::Fifo(40).to_string(), "fifo:40");
+        assert_eq!(Sched::Idle.to_string(), "idle");
     }
 
     #[test]

@@ -23,7 +23,7 @@
 //! console = true               # default false: its stdout lines are also shown on the
 //!                              # launcher's terminal (prefixed with the node's name)
 //! cpus = [0]                   # optional: the CPUs it may run on (sched_setaffinity)
-//! sched = "fifo:40"            # optional: "fifo:N" | "rr:N" (N = 1..=99) | "other"
+//! sched = "fifo:40"            # optional: "fifo:N" | "rr:N" (N = 1..=99) | "other" | "idle"
 //! phase_us = 200               # optional: its periodic loop's deadlines fall this many µs
 //!                              # after each multiple of the loop's period on
 //!                              # CLOCK_MONOTONIC (modulo the period; 0..=999999)

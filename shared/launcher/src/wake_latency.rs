@@ -10,24 +10,49 @@
 //! however it ends, and two launchers' requests combine (the lowest wins). The price: with a
 //! bound of 0 every idle CPU polls instead of sleeping (the host sees busy CPUs; the graph's
 //! processes do not use more CPU time).
+//!
+//! The request is obeyed by the kernel's cpuidle driver. A kernel without one (`current_driver`
+//! `none` in sysfs: a guest whose hypervisor gives no idle hint, such as the 2-vCPU Firecracker
+//! VM of 2026-12-06) halts every idle CPU whatever the request says: there, a 1 kHz timer woke
+//! its thread p50 24.9 µs and p99 1.3 ms late (`sabr bench`, `timer/encoders-tick`). For a
+//! bound of 0 on such a kernel the holder polls the CPUs itself: one thread per CPU it may run
+//! on, pinned there at `SCHED_IDLE`, spinning until the bound is dropped (what the kernel's
+//! `idle=poll` does, from user space). Any other thread that wakes on the CPU preempts it at
+//! once. Its CPU time is the CPU's idle time, not work: the bench and the soak leave the
+//! threads named [`IDLE_POLL_THREAD_PREFIX`] out of a process's CPU use.
 
+use crate::placement::{Placement, Sched};
 use std::fs::{File, OpenOptions};
 use std::io::{ErrorKind, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
 
 /// The kernel's CPU latency QoS device.
 pub const DEVICE: &str = "/dev/cpu_dma_latency";
 
-/// A held CPU wake-up latency bound; the kernel releases it when this is dropped.
+/// The sysfs file naming the registered cpuidle driver (`none` without one).
+const CPUIDLE_DRIVER: &str = "/sys/devices/system/cpu/cpuidle/current_driver";
+
+/// Start of the name of each thread polling an idle CPU (`idle-poll-cpu1` polls CPU 1), as
+/// `/proc/<pid>/task/<tid>/comm` shows it.
+pub const IDLE_POLL_THREAD_PREFIX: &str = "idle-poll-cpu";
+
+/// A held CPU wake-up latency bound; the kernel releases it when this is dropped, and the
+/// polling threads (if any) stop.
 #[derive(Debug)]
 pub struct WakeLatencyBound {
     _device: File,
     /// The bound, µs.
     pub latency_us: u32,
+    polling: Option<IdlePolling>,
 }
 
 impl WakeLatencyBound {
     /// Asks the kernel to keep every CPU's wake-up latency at most `latency_us` until the
-    /// returned bound is dropped. The error says what failed and how to allow it.
+    /// returned bound is dropped; for a bound of 0 on a kernel whose idle loop would still
+    /// halt ([`IdleLoop::obeys_zero_bound`]), also polls the CPUs the process may run on.
+    /// The error says what failed and how to allow it.
     pub fn hold(latency_us: u32) -> Result<Self, String> {
         let mut device = open_device()?;
         let value = i32::try_from(latency_us).map_err(|_| {
@@ -39,15 +64,127 @@ impl WakeLatencyBound {
         device
             .write_all(&value.to_ne_bytes())
             .map_err(|e| format!("cannot write the latency bound to {DEVICE}: {e}"))?;
+        let polling = match latency_us == 0 && !IdleLoop::of_this_kernel().obeys_zero_bound() {
+            true => Some(IdlePolling::start()?),
+            false => None,
+        };
         Ok(Self {
             _device: device,
             latency_us,
+            polling,
         })
     }
 
     /// Checks that a bound could be held, without holding one.
     pub fn check() -> Result<(), String> {
         open_device().map(drop)
+    }
+
+    /// The CPUs this bound keeps polling with threads of its own, ascending; empty when the
+    /// kernel obeys the bound by itself.
+    pub fn polled_cpus(&self) -> &[usize] {
+        self.polling.as_ref().map_or(&[], |p| &p.cpus)
+    }
+}
+
+/// How this kernel's idle loop idles a CPU.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum IdleLoop {
+    /// A cpuidle driver (its name) picks the idle state, within the PM QoS bound.
+    Cpuidle(String),
+    /// Booted with `idle=poll`: idle CPUs always poll.
+    Polls,
+    /// No cpuidle driver: idle CPUs halt, whatever the PM QoS bound.
+    Halts,
+}
+
+impl IdleLoop {
+    /// This kernel's, from sysfs and the kernel command line.
+    pub fn of_this_kernel() -> Self {
+        let driver = std::fs::read_to_string(CPUIDLE_DRIVER).ok();
+        let cmdline = std::fs::read_to_string("/proc/cmdline").unwrap_or_default();
+        Self::from_driver_and_cmdline(driver.as_deref(), &cmdline)
+    }
+
+    /// From the content of `cpuidle/current_driver` (`None`: no cpuidle in sysfs) and of
+    /// `/proc/cmdline`.
+    pub fn from_driver_and_cmdline(driver: Option<&str>, cmdline: &str) -> Self {
+        if cmdline.split_whitespace().any(|word| word == "idle=poll") {
+            return IdleLoop::Polls;
+        }
+        match driver.map(str::trim) {
+            Some(name) if !name.is_empty() && name != "none" => IdleLoop::Cpuidle(name.to_owned()),
+            _ => IdleLoop::Halts,
+        }
+    }
+
+    /// Whether idle CPUs poll under a bound of 0 without help.
+    pub fn obeys_zero_bound(&self) -> bool {
+        !matches!(self, IdleLoop::Halts)
+    }
+}
+
+/// One polling thread per CPU, stopped and joined on drop.
+#[derive(Debug)]
+struct IdlePolling {
+    cpus: Vec<usize>,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl IdlePolling {
+    /// Starts polling every CPU the process's main thread may run on; an error (and nothing
+    /// left running) if a thread cannot be started or placed.
+    fn start() -> Result<Self, String> {
+        let allowed = Placement::unplaced()?
+            .cpus
+            .expect("the unplaced placement lists the process's CPUs");
+        let mut polling = IdlePolling {
+            cpus: Vec::with_capacity(allowed.len()),
+            stop: Arc::new(AtomicBool::new(false)),
+            threads: Vec::with_capacity(allowed.len()),
+        };
+        for cpu in allowed {
+            let placement = Placement {
+                cpus: Some(vec![cpu]),
+                sched: Some(Sched::Idle),
+            }
+            .prepare()?;
+            let stop = Arc::clone(&polling.stop);
+            let (placed_tx, placed_rx) = mpsc::channel();
+            let thread = std::thread::Builder::new()
+                .name(format!("{IDLE_POLL_THREAD_PREFIX}{cpu}"))
+                .spawn(move || {
+                    let placed = placement.apply();
+                    let ok = placed.is_ok();
+                    let _ = placed_tx.send(placed);
+                    while ok && !stop.load(Ordering::Relaxed) {
+                        std::hint::spin_loop();
+                    }
+                })
+                .map_err(|e| format!("cannot start a thread to poll idle CPU {cpu}: {e}"))?;
+            polling.threads.push(thread);
+            match placed_rx.recv() {
+                Ok(Ok(())) => polling.cpus.push(cpu),
+                Ok(Err(error)) => {
+                    return Err(format!(
+                        "cannot place the thread polling idle CPU {cpu} (SCHED_IDLE on that \
+                         CPU): {error}"
+                    ))
+                }
+                Err(_) => return Err(format!("the thread polling idle CPU {cpu} ended")),
+            }
+        }
+        Ok(polling)
+    }
+}
+
+impl Drop for IdlePolling {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for thread in self.threads.drain(..) {
+            let _ = thread.join();
+        }
     }
 }
 
@@ -102,6 +239,52 @@ mod tests {
         Some(usage() > before)
     }
 
+    /// The threads of this process polling idle CPUs: (name, `Cpus_allowed_list`, policy).
+    fn polling_threads() -> Vec<(String, String, u32)> {
+        let mut found = Vec::new();
+        for task in std::fs::read_dir("/proc/self/task")
+            .unwrap()
+            .filter_map(Result::ok)
+        {
+            let read = |file: &str| std::fs::read_to_string(task.path().join(file));
+            let Ok(name) = read("comm") else { continue };
+            let name = name.trim().to_owned();
+            if !name.starts_with(IDLE_POLL_THREAD_PREFIX) {
+                continue;
+            }
+            let (Ok(status), Ok(stat)) = (read("status"), read("stat")) else {
+                continue;
+            };
+            let cpus = status
+                .lines()
+                .find_map(|line| line.strip_prefix("Cpus_allowed_list:"))
+                .unwrap()
+                .trim()
+                .to_owned();
+            // Field 41 (the policy), counted after the command name's closing ')'.
+            let after_name = &stat[stat.rfind(')').unwrap() + 2..];
+            let policy = after_name.split(' ').nth(41 - 3).unwrap().parse().unwrap();
+            found.push((name, cpus, policy));
+        }
+        found.sort();
+        found
+    }
+
+    #[test]
+    fn idle_loops_are_told_apart_by_the_cpuidle_driver_and_the_command_line() {
+        let idle = IdleLoop::from_driver_and_cmdline;
+        assert_eq!(idle(Some("none\n"), "console=ttyS0 quiet"), IdleLoop::Halts);
+        assert_eq!(idle(None, ""), IdleLoop::Halts);
+        assert_eq!(
+            idle(Some("intel_idle\n"), "quiet"),
+            IdleLoop::Cpuidle("intel_idle".to_owned())
+        );
+        assert_eq!(idle(Some("none"), "quiet idle=poll"), IdleLoop::Polls);
+        assert!(!IdleLoop::Halts.obeys_zero_bound());
+        assert!(IdleLoop::Polls.obeys_zero_bound());
+        assert!(IdleLoop::Cpuidle("haltpoll".to_owned()).obeys_zero_bound());
+    }
+
     #[test]
     fn a_held_bound_of_zero_keeps_the_cpus_out_of_sleeping_idle_states_or_says_why_not() {
         match WakeLatencyBound::hold(0) {
@@ -114,11 +297,42 @@ mod tests {
                     );
                 }
                 assert_eq!(WakeLatencyBound::check(), Ok(()));
+                // Where the kernel would halt idle CPUs anyway, a thread polls each CPU of
+                // the process, pinned to it at SCHED_IDLE (policy 5), until the bound ends.
+                let expected: Vec<(String, String, u32)> =
+                    if IdleLoop::of_this_kernel().obeys_zero_bound() {
+                        Vec::new()
+                    } else {
+                        let cpus = Placement::unplaced().unwrap().cpus.unwrap();
+                        let mut threads: Vec<_> = cpus
+                            .iter()
+                            .map(|cpu| {
+                                (
+                                    format!("{IDLE_POLL_THREAD_PREFIX}{cpu}"),
+                                    cpu.to_string(),
+                                    5,
+                                )
+                            })
+                            .collect();
+                        threads.sort();
+                        threads
+                    };
+                assert_eq!(polling_threads(), expected);
+                assert_eq!(bound.polled_cpus().len(), expected.len());
+                drop(bound);
+                assert_eq!(polling_threads(), Vec::new());
             }
             Err(reason) => {
                 assert!(reason.contains(DEVICE), "{reason}");
                 assert_eq!(WakeLatencyBound::check(), Err(reason));
             }
+        }
+    }
+
+    #[test]
+    fn a_bound_above_zero_polls_no_cpu_itself() {
+        if let Ok(bound) = WakeLatencyBound::hold(100) {
+            assert_eq!(bound.polled_cpus(), &[] as &[usize]);
         }
     }
 }
