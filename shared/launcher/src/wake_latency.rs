@@ -294,6 +294,12 @@ mod tests {
                 names.sort();
                 assert_eq!(polling_threads(), names);
                 drop(bound);
+                // Joined threads leave /proc/self/task once the kernel has reaped them, a
+                // moment after the join returns.
+                let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+                while !polling_threads().is_empty() && std::time::Instant::now() < deadline {
+                    std::thread::sleep(std::time::Duration::from_millis(1));
+                }
                 assert_eq!(polling_threads(), Vec::<String>::new());
             }
             Err(reason) => {
