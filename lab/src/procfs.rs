@@ -19,14 +19,9 @@ pub fn read(pid: u32) -> anyhow::Result<ProcReading> {
     let status_path = format!("/proc/{pid}/status");
     let status = std::fs::read_to_string(&status_path)
         .with_context(|| format!("cannot read {status_path}"))?;
-    let stat_path = format!("/proc/{pid}/stat");
-    let stat =
-        std::fs::read_to_string(&stat_path).with_context(|| format!("cannot read {stat_path}"))?;
     Ok(ProcReading {
         rss_kib: parse_vm_rss_kib(&status).with_context(|| status_path.clone())?,
-        cpu_ticks: parse_cpu_ticks(&stat)
-            .with_context(|| stat_path.clone())?
-            .saturating_sub(idle_polling_ticks(pid)),
+        cpu_ticks: cpu_ticks(pid)?,
     })
 }
 

@@ -31,7 +31,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 use steal::CpuTimes;
 use supervisor::Supervisor;
-use wake_latency::{IdleLoop, WakeLatencyBound};
+use wake_latency::WakeLatencyBound;
 
 /// Arguments of `sabr launch`.
 #[derive(Debug, Clone, clap::Args)]
@@ -68,7 +68,7 @@ fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) -> anyhow::Resu
     use std::fmt::Write as _;
     let mut text = format!("{}: valid; start order:\n", args.file.display());
     if let Some((latency_us, _)) = graph.cpu_wake_latency {
-        let polled = match latency_us == 0 && !IdleLoop::of_this_kernel().obeys_zero_bound() {
+        let polled = match wake_latency::polls_idle_cpus_itself(latency_us) {
             true => "; this kernel has no cpuidle driver: the launcher polls idle CPUs itself",
             false => "",
         };

@@ -50,8 +50,8 @@ pub struct WakeLatencyBound {
 
 impl WakeLatencyBound {
     /// Asks the kernel to keep every CPU's wake-up latency at most `latency_us` until the
-    /// returned bound is dropped; for a bound of 0 on a kernel whose idle loop would still
-    /// halt ([`IdleLoop::obeys_zero_bound`]), also polls the CPUs the process may run on.
+    /// returned bound is dropped; where [`polls_idle_cpus_itself`], also polls the CPUs the
+    /// process may run on.
     /// The error says what failed and how to allow it.
     pub fn hold(latency_us: u32) -> Result<Self, String> {
         let mut device = open_device()?;
@@ -64,7 +64,7 @@ impl WakeLatencyBound {
         device
             .write_all(&value.to_ne_bytes())
             .map_err(|e| format!("cannot write the latency bound to {DEVICE}: {e}"))?;
-        let polling = match latency_us == 0 && !IdleLoop::of_this_kernel().obeys_zero_bound() {
+        let polling = match polls_idle_cpus_itself(latency_us) {
             true => Some(IdlePolling::start()?),
             false => None,
         };
@@ -85,6 +85,12 @@ impl WakeLatencyBound {
     pub fn polled_cpus(&self) -> &[usize] {
         self.polling.as_ref().map_or(&[], |p| &p.cpus)
     }
+}
+
+/// Whether a bound of `latency_us` held on this kernel polls the idle CPUs with threads of
+/// its own: a bound of 0 where the idle loop would halt anyway.
+pub fn polls_idle_cpus_itself(latency_us: u32) -> bool {
+    latency_us == 0 && !IdleLoop::of_this_kernel().obeys_zero_bound()
 }
 
 /// How this kernel's idle loop idles a CPU.
