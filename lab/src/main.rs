@@ -26,6 +26,8 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Soak(args) => soak::run(&args),
     };
+    // A write error of what the command printed fails it, after the work it did.
+    let result = result.and_then(|code| sabr_launcher::console::finish().map(|()| code));
     result.unwrap_or_else(|error| {
         eprintln!("sabr-lab: {error:#}");
         ExitCode::FAILURE

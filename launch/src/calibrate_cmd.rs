@@ -4,6 +4,7 @@
 //! arm described by URDF gives `params.json` (and `params-<step>.json` per step),
 //! `report.json` and `report.html` (docs/measured-data.md).
 
+use sabr_launcher::{out, outln};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -59,23 +60,25 @@ fn run_serial(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot calibrate from {}", args.recording.display()))?;
     let written = write_serial_outputs(&calibration, &args.out).map_err(anyhow::Error::msg)?;
     let report = &calibration.report;
-    println!(
+    outln!(
         "{}: {} poses fitted, {} held out",
-        report.robot, report.poses[0], report.poses[1]
+        report.robot,
+        report.poses[0],
+        report.poses[1]
     );
-    println!(
-        "step                                 params  fit RMS mm  held-out RMS / mean / max mm"
-    );
+    outln!("step                                 params  fit RMS mm  held-out RMS / mean / max mm");
     for step in &report.steps {
         let held = step.held_out.map_or("–".to_string(), |s| {
             format!("{:.3} / {:.3} / {:.3}", s.rms_mm, s.mean_mm, s.max_mm)
         });
-        println!(
+        outln!(
             "{:<36} {:>6} {:>11.3}  {held}",
-            step.model, step.parameters, step.fit.rms_mm
+            step.model,
+            step.parameters,
+            step.fit.rms_mm
         );
     }
-    println!(
+    outln!(
         "dropped by identifiability: {} parameters; rejected families: {}",
         report.dropped_parameters.len(),
         if report.rejected.is_empty() {
@@ -84,7 +87,7 @@ fn run_serial(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
             report.rejected.join(", ")
         }
     );
-    println!(
+    outln!(
         "wrote {} to {} in {:.2} s",
         written.join(", "),
         args.out.display(),
@@ -105,36 +108,43 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("cannot calibrate from {}", args.recording.display()))?;
     write_outputs(&calibration, &args.out)?;
     let report = &calibration.report;
-    println!(
+    outln!(
         "tracker latency {:.2} ± {:.2} ms",
-        report.latency_ms, report.latency_std_ms
+        report.latency_ms,
+        report.latency_std_ms
     );
-    println!("model      front mm  back mm  tip mm  held-out marker tip RMS mm");
+    outln!("model      front mm  back mm  tip mm  held-out marker tip RMS mm");
     for r in &report.residual_rms {
         let held_out = r
             .validation_marker_tip
             .map_or("–".to_string(), |e| format!("{:.3}", e.rms_mm));
-        println!(
+        outln!(
             "{:<9} {:>9.3} {:>8.3} {:>7.3}  {held_out}",
-            r.model, r.front_mm, r.back_mm, r.tip_mm
+            r.model,
+            r.front_mm,
+            r.back_mm,
+            r.tip_mm
         );
     }
     if let Some(tip) = report.validation.tip_error {
-        println!(
+        outln!(
             "tip error ({}): RMS {:.3} mm, max {:.3} mm over {}",
-            report.validation.tip_error_source, tip.rms_mm, tip.max_mm, tip.count
+            report.validation.tip_error_source,
+            tip.rms_mm,
+            tip.max_mm,
+            tip.count
         );
     }
     let identifiability = &report.identifiability;
-    println!(
+    outln!(
         "identifiability: rank {} of {}, condition number {:.3e}, {} fixed",
         identifiability.rank,
         identifiability.parameters,
         identifiability.condition_number,
         identifiability.fixed.len()
     );
-    print!("{}", sabr_calibration::report::summary_text(report));
-    println!(
+    out!("{}", sabr_calibration::report::summary_text(report));
+    outln!(
         "wrote params.toml, report.json, report.html, validation_predictions.csv to {} in {:.2} s",
         args.out.display(),
         report.run_time_s

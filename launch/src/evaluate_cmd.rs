@@ -3,6 +3,7 @@
 //! another poses-v1 recording of the same robot. `--refit-setup` registers and fits only
 //! the set-up frames (a new instrument placement) and keeps everything else.
 
+use sabr_launcher::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -38,11 +39,14 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<ExitCode> {
     let stats = evaluate_serial(&recording, &params, &args.params, args.refit_setup)
         .with_context(|| format!("cannot evaluate on {}", args.recording.display()))?;
     if args.json {
-        println!("{}", serde_json::to_string(&stats)?);
+        outln!("{}", serde_json::to_string(&stats)?);
     } else {
-        println!(
+        outln!(
             "position error over {} measurements: RMS {:.3} mm, mean {:.3} mm, max {:.3} mm",
-            stats.count, stats.rms_mm, stats.mean_mm, stats.max_mm
+            stats.count,
+            stats.rms_mm,
+            stats.mean_mm,
+            stats.max_mm
         );
     }
     Ok(ExitCode::SUCCESS)

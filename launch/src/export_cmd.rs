@@ -3,6 +3,7 @@
 //! offsets of the homing phase, or with a calibrated `params.toml` and the residual per
 //! tracker frame.
 
+use sabr_launcher::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -59,7 +60,7 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
     };
     let summary = export_recording(&recording, &model, &args.out)?;
     let size = std::fs::metadata(&args.out).map_or(0, |meta| meta.len());
-    println!(
+    outln!(
         "wrote {} ({:.1} MB) in {:.2} s: {} encoder samples, {} tracker frames, {} phases",
         args.out.display(),
         size as f64 / 1e6,
@@ -69,7 +70,7 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
         recording.phases.len()
     );
     for (topic, count) in &summary.messages {
-        println!(
+        outln!(
             "  {:<22} {:>8} messages  {}",
             topic.name(),
             count,
@@ -78,9 +79,11 @@ fn run_mcap(args: &McapArgs) -> anyhow::Result<ExitCode> {
     }
     if let Some(medians) = summary.median_residual_mm {
         let shown = medians.map(|m| m.map_or("–".to_owned(), |m| format!("{m:.3} mm")));
-        println!(
+        outln!(
             "median residual of the calibrated model: front {}, back {}, tip {}",
-            shown[0], shown[1], shown[2]
+            shown[0],
+            shown[1],
+            shown[2]
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -18,6 +18,7 @@
 //!   `T_F_TM` is its inverse (the probe sits 109 mm out along the flange's z axis).
 //! - The commanded `Goal` poses and the spreadsheet-mangled time stamps are not imported.
 
+use sabr_launcher::outln;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -157,7 +158,7 @@ fn run_ipa(args: &IpaArgs) -> anyhow::Result<ExitCode> {
     };
     let out = create_out_dir(Some(args.out.clone()), "import")?;
     recording.write(&out)?;
-    println!("{}: {} poses", out.display(), recording.rows.len());
+    outln!("{}: {} poses", out.display(), recording.rows.len());
     Ok(ExitCode::SUCCESS)
 }
 

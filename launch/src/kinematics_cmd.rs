@@ -11,6 +11,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::ArgGroup;
 use glam::DVec3;
+use sabr_launcher::console;
 use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{
     forward, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,
@@ -74,11 +75,14 @@ pub fn run_fk(args: &FkArgs) -> anyhow::Result<ExitCode> {
     };
     let from_counts = args.counts.is_some();
     let mut reader = ColumnReader::open(path, &columns)?;
-    let mut out = output()?;
+    let mut out = output();
     out.write_record(POSE_COLUMNS)?;
     let mut failures = 0;
     let mut directions = DirectionTracker::new(DIRECTION_DEAD_BAND_COUNTS as f64);
     while let Some(values) = reader.next_row()? {
+        if console::silenced() {
+            break;
+        }
         let values: [f64; 5] = std::array::from_fn(|i| values[i]);
         let q = if from_counts {
             let motion = directions.update(&values);
@@ -107,7 +111,7 @@ pub fn run_ik(args: &IkArgs) -> anyhow::Result<ExitCode> {
     let geometry = RealtimeGeometry::from(&params.effective_geometry());
     let with_counts = params.joints.offset.is_some();
     let mut reader = ColumnReader::open(&args.targets, &POSE_COLUMNS)?;
-    let mut out = output()?;
+    let mut out = output();
     let mut header: Vec<&str> = JOINT_COLUMNS.to_vec();
     if with_counts {
         header.extend(COUNT_COLUMNS);
@@ -115,6 +119,9 @@ pub fn run_ik(args: &IkArgs) -> anyhow::Result<ExitCode> {
     out.write_record(&header)?;
     let mut failures = 0;
     while let Some(v) = reader.next_row()? {
+        if console::silenced() {
+            break;
+        }
         let tip = DVec3::new(v[0], v[1], v[2]);
         let direction = DVec3::new(v[3], v[4], v[5]);
         let row = geometry
@@ -161,11 +168,13 @@ fn load_params(path: &Path) -> anyhow::Result<RobotParams> {
     Ok(sabr_model::read_params_file(path)?)
 }
 
-/// CSV writer on standard output (rows may be shorter than the header: error rows).
-fn output() -> anyhow::Result<csv::Writer<std::io::StdoutLock<'static>>> {
-    Ok(csv::WriterBuilder::new()
+/// CSV writer on standard output (rows may be shorter than the header: error rows), through
+/// [`console`]: once it is silenced (the reader left, or a write failed) the command stops
+/// reading rows.
+fn output() -> csv::Writer<console::Stdout> {
+    csv::WriterBuilder::new()
         .flexible(true)
-        .from_writer(std::io::stdout().lock()))
+        .from_writer(console::Stdout)
 }
 
 /// Flushes the output and turns the failure count into the exit status.

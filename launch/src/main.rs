@@ -62,6 +62,8 @@ fn main() -> std::process::ExitCode {
         Command::Soak(args) => lab_cmd::run("soak", &args),
         Command::Export(args) => export_cmd::run(&args),
     };
+    // A write error of what the command printed fails it, after the work it did.
+    let result = result.and_then(|code| launcher::console::finish().map(|()| code));
     match result {
         Ok(code) => code,
         Err(error) => {

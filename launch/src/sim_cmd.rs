@@ -2,6 +2,7 @@
 //! recording (format v1) to DIR and the truth (true parameters, effects, true validation
 //! poses, tracker frame timing) to DIR/truth/.
 
+use sabr_launcher::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -83,7 +84,7 @@ fn run_record(args: &RecordArgs) -> anyhow::Result<ExitCode> {
         .iter()
         .filter(|f| f.arrival_ns.is_none())
         .count();
-    println!(
+    outln!(
         "recorded {span_s:.1} s of robot time: {} encoder samples, {} tracker frames ({} dropped), \
          {} validation poses, {} effect(s) → {} (truth in {}) in {:.2} s",
         recording.encoders.len(),

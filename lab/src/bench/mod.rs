@@ -32,6 +32,7 @@ use sabr_launcher::placement::Placement;
 use sabr_launcher::progress::Progress;
 use sabr_launcher::steal::CpuTimes;
 use sabr_launcher::wake_latency::WakeLatencyBound;
+use sabr_launcher::{out, outln};
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::collections::BTreeMap;
@@ -220,7 +221,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     let settings = Settings::new(args)?;
     let out = sabr_launcher::create_out_dir(args.out.clone(), "bench")?;
     let machine = machine::describe();
-    println!("sabr bench on {machine}; output in {}", out.display());
+    outln!("sabr bench on {machine}; output in {}", out.display());
     let cpu_at_start = CpuTimes::now();
     let mut results = Results::default();
     if settings.runs(Part::Baselines) {
@@ -239,42 +240,42 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
     output::write_csv(&out.join(output::CSV_FILE), &results.measurements)?;
     output::write_idle_csv(&out.join(output::IDLE_CSV_FILE), &results.idle)?;
 
-    println!();
-    print!("{}", output::percentile_table(&results.measurements));
+    outln!();
+    out!("{}", output::percentile_table(&results.measurements));
     if settings.runs(Part::Baselines) {
-        println!("\npayloads (request → response):");
+        outln!("\npayloads (request → response):");
         for payload in Payload::ALL {
-            println!("  {}", payload.describe());
+            outln!("  {}", payload.describe());
         }
     }
     let transport_checks = hops::transport_checks(&results.measurements);
     if !transport_checks.is_empty() {
-        println!("\nthe doorbell against Unix sockets (same payload, same placement):");
-        print!("{}", hops::transport_table(&transport_checks));
+        outln!("\nthe doorbell against Unix sockets (same payload, same placement):");
+        out!("{}", hops::transport_table(&transport_checks));
     }
     if !results.idle.is_empty() {
-        print!("\n{}", output::idle_table(&results.idle));
+        out!("\n{}", output::idle_table(&results.idle));
     }
     for note in &results.notes {
-        println!("{note}");
+        outln!("{note}");
     }
     if settings.runs(Part::Hops) {
-        println!(
+        outln!(
             "\nlive-graph hops (p50 as a ratio to the same payload's futex round-trip p50, p99 \
              to its Unix-socket round-trip p99, p50 to the futex round trip paced at the hop's \
              rate):"
         );
-        print!("{}", hops::ratio_table(&hop_rows));
+        out!("{}", hops::ratio_table(&hop_rows));
     }
     for line in &results.unavailable {
-        println!("{line}");
+        outln!("{line}");
     }
-    println!(
+    outln!(
         "\nload average at the end: {} (1, 5, 15 min)",
         machine::load_average()
     );
-    println!("{}", steal_line(cpu_at_start, CpuTimes::now()));
-    println!(
+    outln!("{}", steal_line(cpu_at_start, CpuTimes::now()));
+    outln!(
         "\nwrote {} .hgrm files (values in µs), {} and {} to {}",
         results.measurements.len(),
         output::CSV_FILE,

@@ -24,6 +24,7 @@ use report::{Goals, Outcome, SoakCsv};
 use sabr_launcher::describe;
 use sabr_launcher::progress::Progress;
 use sabr_launcher::spec;
+use sabr_launcher::{out, outln};
 use sabr_node::Domain;
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -152,7 +153,7 @@ pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     }
     let out = sabr_launcher::create_out_dir(args.out.clone(), "soak")?;
     let ticks_per_second = crate::procfs::ticks_per_second()?;
-    println!(
+    outln!(
         "sabr soak: {} — {} nodes, domain {domain}, window {:.0} s, output {}",
         args.graph.display(),
         graph.nodes.len(),
@@ -222,11 +223,11 @@ pub fn run(args: &SoakArgs) -> anyhow::Result<ExitCode> {
     };
     let checks = report::checks(&outcome, &plan.goals);
     let text = report::summary_text(&outcome, &checks);
-    print!("{text}");
+    out!("{text}");
     let summary = out.join(report::SUMMARY_TXT);
     std::fs::write(&summary, &text)
         .with_context(|| format!("cannot write {}", summary.display()))?;
-    println!(
+    outln!(
         "wrote {}, {} and {} to {}",
         report::PROCESS_CSV,
         report::STREAMS_CSV,

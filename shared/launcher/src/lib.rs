@@ -10,6 +10,7 @@
 //! use it.
 
 mod build;
+pub mod console;
 mod out_dir;
 pub mod placement;
 pub mod progress;
@@ -62,9 +63,9 @@ pub struct LaunchArgs {
 }
 
 /// Prints what `sabr launch --check` shows: the graph's start order with each node's placement
-/// and loop phase, and the CPU wake-up latency bound. A closed standard output (`| head`) ends
-/// the listing quietly.
-fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) -> anyhow::Result<()> {
+/// and loop phase, and the CPU wake-up latency bound (through [`console`]: a closed standard
+/// output, `| head`, ends the listing quietly).
+fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) {
     use std::fmt::Write as _;
     let mut text = format!("{}: valid; start order:\n", args.file.display());
     if let Some((latency_us, _)) = graph.cpu_wake_latency {
@@ -93,12 +94,7 @@ fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) -> anyhow::Resu
             node.exec.display()
         );
     }
-    match std::io::Write::write_all(&mut std::io::stdout().lock(), text.as_bytes()) {
-        Err(error) if error.kind() != std::io::ErrorKind::BrokenPipe => {
-            Err(error).context("cannot write the start order to standard output")
-        }
-        _ => Ok(()),
-    }
+    out!("{text}");
 }
 
 /// The directory of the node executables: `dir` when given, else the directory of the running
@@ -130,7 +126,7 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
         anyhow::anyhow!("{error}\n(or add --unplaced to run the graph without its placement)")
     })?;
     if args.check {
-        print_start_order(args, &graph)?;
+        print_start_order(args, &graph);
         return Ok(ExitCode::SUCCESS);
     }
     let duration = match args.duration {

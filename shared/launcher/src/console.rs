@@ -1,0 +1,180 @@
+//! Standard output of the command-line tools (`sabr`, `sabr-lab`): what they print for a
+//! reader, written so that a reader who leaves early (`sabr calibrate … | head`) ends the
+//! printing, never the work.
+//!
+//! Rust ignores `SIGPIPE`, so a write to a closed pipe fails with `EPIPE`, and `println!`
+//! panics on it: a calibration piped into `head` died after its first lines, before its
+//! report was written. Here a closed pipe silences the rest of the output quietly, as `git`
+//! or `grep` end; the command still finishes its work and writes its files, and exits as it
+//! would have. Any other write error (a full disk behind `> file`) also silences the output,
+//! and is kept for [`finish`], which the command's `main` calls last to report it.
+
+use std::io::{self, Write};
+use std::sync::Mutex;
+
+/// What became of standard output so far.
+#[derive(Debug, Default)]
+struct State {
+    /// The reader left (`EPIPE`): nothing more is written, and that is not an error.
+    reader_left: bool,
+    /// The first other write error: nothing more is written, and [`finish`] reports it.
+    failed: Option<io::Error>,
+}
+
+impl State {
+    /// Writes `bytes` to `out` unless the output was silenced, and records how a write failed.
+    fn write(&mut self, out: &mut impl Write, bytes: &[u8]) {
+        if self.reader_left || self.failed.is_some() {
+            return;
+        }
+        match out.write_all(bytes).and_then(|()| out.flush()) {
+            Ok(()) => {}
+            Err(error) if error.kind() == io::ErrorKind::BrokenPipe => self.reader_left = true,
+            Err(error) => self.failed = Some(error),
+        }
+    }
+
+    /// The kept write error, if any, as the error of the command.
+    fn finish(&mut self) -> anyhow::Result<()> {
+        match self.failed.take() {
+            Some(error) => {
+                Err(anyhow::Error::new(error).context("cannot write to standard output"))
+            }
+            None => Ok(()),
+        }
+    }
+}
+
+/// The state of this process's standard output.
+static STDOUT: Mutex<State> = Mutex::new(State {
+    reader_left: false,
+    failed: None,
+});
+
+fn with_state<R>(f: impl FnOnce(&mut State) -> R) -> R {
+    // A panic elsewhere while the lock was held cannot leave `State` inconsistent.
+    let mut state = STDOUT
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    f(&mut state)
+}
+
+/// Writes `text` to standard output (used by [`out!`](crate::out) and
+/// [`outln!`](crate::outln)); see the module documentation for failures.
+pub fn write_str(text: &str) {
+    with_state(|state| state.write(&mut io::stdout().lock(), text.as_bytes()));
+}
+
+/// True once nothing more will be written (the reader left, or a write failed): a command
+/// that only prints (`sabr fk`) may stop early.
+pub fn silenced() -> bool {
+    with_state(|state| state.reader_left || state.failed.is_some())
+}
+
+/// The first write error of standard output other than a reader who left, as an error naming
+/// standard output; `Ok` otherwise. The command's `main` calls it after the command ran.
+pub fn finish() -> anyhow::Result<()> {
+    with_state(State::finish)
+}
+
+/// Standard output as an [`io::Write`] for writers that stream to it (a CSV writer): every
+/// write goes through the same state as [`write_str`], so a reader who left makes writes
+/// succeed without effect.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Stdout;
+
+impl Write for Stdout {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        with_state(|state| state.write(&mut io::stdout().lock(), buf));
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+/// `print!` to standard output through [`console`](crate::console): never panics.
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::console::write_str(&::std::format!($($arg)*))
+    };
+}
+
+/// `println!` to standard output through [`console`](crate::console): never panics.
+#[macro_export]
+macro_rules! outln {
+    () => {
+        $crate::console::write_str("\n")
+    };
+    ($($arg:tt)*) => {
+        $crate::console::write_str(&::std::format!("{}\n", ::std::format_args!($($arg)*)))
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A writer that takes `accepts` writes, then fails every write with `error`.
+    struct Failing {
+        written: Vec<u8>,
+        accepts: usize,
+        error: io::ErrorKind,
+    }
+
+    impl Write for Failing {
+        fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+            if self.accepts == 0 {
+                return Err(io::Error::from(self.error));
+            }
+            self.accepts -= 1;
+            self.written.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+
+        fn flush(&mut self) -> io::Result<()> {
+            Ok(())
+        }
+    }
+
+    fn failing(accepts: usize, error: io::ErrorKind) -> Failing {
+        Failing {
+            written: Vec::new(),
+            accepts,
+            error,
+        }
+    }
+
+    #[test]
+    fn a_reader_who_left_silences_the_output_without_an_error() {
+        let mut state = State::default();
+        let mut out = failing(1, io::ErrorKind::BrokenPipe);
+        state.write(&mut out, b"first\n");
+        state.write(&mut out, b"second\n");
+        assert!(state.reader_left);
+        // The writer would accept again; the output stays silenced.
+        out.accepts = 1;
+        state.write(&mut out, b"third\n");
+        assert_eq!(out.written, b"first\n");
+        assert!(state.finish().is_ok());
+    }
+
+    #[test]
+    fn another_write_error_silences_the_output_and_is_reported_once() {
+        let mut state = State::default();
+        let mut out = failing(0, io::ErrorKind::StorageFull);
+        state.write(&mut out, b"lost\n");
+        out.accepts = 1;
+        state.write(&mut out, b"after\n");
+        assert!(out.written.is_empty());
+        assert!(!state.reader_left);
+        let error = state.finish().expect_err("the write error is reported");
+        assert!(
+            format!("{error:#}").starts_with("cannot write to standard output: "),
+            "{error:#}"
+        );
+        assert!(state.finish().is_ok(), "reported once");
+    }
+}
