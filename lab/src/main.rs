@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use sabr_lab::{bench, soak};
+use sabr_launcher::errln;
 use std::process::ExitCode;
 
 /// The performance lab of the SABR graph.
@@ -29,7 +30,7 @@ fn main() -> ExitCode {
     // A write error of what the command printed fails it, after the work it did.
     let result = result.and_then(|code| sabr_launcher::console::finish().map(|()| code));
     result.unwrap_or_else(|error| {
-        eprintln!("sabr-lab: {error:#}");
+        errln!("sabr-lab: {error:#}");
         ExitCode::FAILURE
     })
 }

@@ -18,6 +18,7 @@
 //!   `T_F_TM` is its inverse (the probe sits 109 mm out along the flange's z axis).
 //! - The commanded `Goal` poses and the spreadsheet-mangled time stamps are not imported.
 
+use sabr_launcher::errln;
 use sabr_launcher::outln;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -135,7 +136,7 @@ fn run_ipa(args: &IpaArgs) -> anyhow::Result<ExitCode> {
         let path = measurement_file(&one.dir)?;
         let before = rows.len();
         read_measurements(&path, &joints, setup, &one.name, &mut rows)?;
-        eprintln!(
+        errln!(
             "{}: {} poses, set-up {setup}",
             path.display(),
             rows.len() - before
@@ -226,11 +227,11 @@ fn assign_setups(series: &[Series], overrides: &[(String, String)]) -> anyhow::R
                 .find(|(name, _)| name == &series[i].name)
             {
                 Some((_, setup)) => {
-                    eprintln!("{}: set-up {setup} (--setup)", series[i].name);
+                    errln!("{}: set-up {setup} (--setup)", series[i].name);
                     setup.clone()
                 }
                 None => {
-                    eprintln!("{}: set-up {joined} ({reason})", series[i].name);
+                    errln!("{}: set-up {joined} ({reason})", series[i].name);
                     joined.clone()
                 }
             };

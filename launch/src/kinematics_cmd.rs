@@ -3,6 +3,7 @@
 //! per input row; a row that has no solution becomes `error,<reason>` and makes the command
 //! exit with a failure status after all rows are written.
 
+use sabr_launcher::errln;
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -186,7 +187,7 @@ fn finish(
 ) -> anyhow::Result<ExitCode> {
     out.flush().context("cannot write to standard output")?;
     if failures > 0 {
-        eprintln!("sabr: {failures} of {rows} {what} have no solution (see the error rows)");
+        errln!("sabr: {failures} of {rows} {what} have no solution (see the error rows)");
         Ok(ExitCode::FAILURE)
     } else {
         Ok(ExitCode::SUCCESS)

@@ -1,6 +1,7 @@
 //! `sabr`: the launcher and the user commands of the SABR biopsy-robot project.
 
 use clap::{Parser, Subcommand};
+use sabr_launcher::errln;
 
 mod calibrate_cmd;
 mod evaluate_cmd;
@@ -67,7 +68,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(error) => {
-            eprintln!("sabr: {error:#}");
+            errln!("sabr: {error:#}");
             std::process::ExitCode::FAILURE
         }
     }

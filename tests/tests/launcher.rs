@@ -1,6 +1,6 @@
 //! The launcher running real processes: dependency order and readiness, restart after
-//! SIGKILL, required nodes, the stop ladder, the done signal, launch-file errors, placement
-//! and the idle CPUs' polling.
+//! SIGKILL, required nodes, the stop ladder, the done signal, launch-file errors, placement,
+//! the idle CPUs' polling, and a terminal whose reader left.
 
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
@@ -258,6 +258,43 @@ depends_on = ["idle"]
         "{output}"
     );
     assert!(sabr_node::domain_files(&graph.domain).is_empty());
+}
+
+#[test]
+fn a_launcher_whose_reader_left_still_runs_and_stops_its_graph() {
+    // `sabr launch FILE 2>&1 | head -1`: every line after the first meets a closed pipe. The
+    // supervisor must not die of it, and must still stop its nodes and clean up.
+    let domain = sabr_integration_tests::test_domain("reader-left");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("graph.toml");
+    std::fs::write(&file, "[[node]]\nname = \"a\"\nexec = \"sabr-test-node\"\n").unwrap();
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let status = std::process::Command::new(sabr_integration_tests::bin("sabr-test-launch"))
+        .arg(&file)
+        .arg("--run-dir")
+        .arg(dir.path().join("runs"))
+        .arg("--domain")
+        .arg(domain.as_str())
+        .args(["--duration", "1"])
+        .stdin(std::process::Stdio::null())
+        .stdout(writer.try_clone().unwrap())
+        .stderr(writer)
+        .status()
+        .unwrap();
+    assert!(status.success(), "{status}");
+    // The node ran and logged.
+    let runs: Vec<_> = std::fs::read_dir(dir.path().join("runs"))
+        .unwrap()
+        .map(|run| run.unwrap().path().join("logs/a.log"))
+        .collect();
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    let log = std::fs::read_to_string(&runs[0]).unwrap();
+    assert!(!log.is_empty(), "{}", runs[0].display());
+    assert!(
+        sabr_node::domain_files(&domain).is_empty(),
+        "iceoryx2 files of {domain} left behind"
+    );
 }
 
 #[test]

@@ -7,6 +7,7 @@ use super::stats::Measurement;
 use anyhow::{bail, Context};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
+use sabr_launcher::errln;
 use sabr_launcher::placement::{Placement, Sched};
 use sabr_launcher::spec;
 use sabr_node::msgs::LifecycleState;
@@ -373,7 +374,7 @@ impl Drop for LiveGraph {
     fn drop(&mut self) {
         if self.launcher.is_some() {
             if let Err(error) = self.stop_launcher() {
-                eprintln!("sabr bench: {error:#}");
+                errln!("sabr bench: {error:#}");
             }
         }
     }

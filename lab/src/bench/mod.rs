@@ -32,7 +32,7 @@ use sabr_launcher::placement::Placement;
 use sabr_launcher::progress::Progress;
 use sabr_launcher::steal::CpuTimes;
 use sabr_launcher::wake_latency::WakeLatencyBound;
-use sabr_launcher::{out, outln};
+use sabr_launcher::{errln, out, outln};
 use sabr_node::Domain;
 use stats::{format_ns, Measurement};
 use std::collections::BTreeMap;
@@ -211,7 +211,7 @@ impl Results {
 
     fn not_available(&mut self, name: &str, error: &anyhow::Error) {
         let line = format!("{name}: not available: {error:#}");
-        eprintln!("{line}");
+        errln!("{line}");
         self.unavailable.push(line);
     }
 }

@@ -4,6 +4,7 @@
 
 use super::processes::{Reading, Tracked};
 use super::streams::SeqCheck;
+use sabr_launcher::errln;
 use sabr_node::msgs::{services, EncoderSample, LifecycleState, MatchedSample, TrackerFrame};
 use sabr_node::{Domain, GraphObserver, NodeError, NodeRuntime, Subscriber};
 use std::collections::BTreeMap;
@@ -86,7 +87,7 @@ impl Monitor {
         let mut encoder = |sample: EncoderSample| {
             let missing = streams.encoders.push(sample.seq, sample.t_ns);
             if missing > 0 && streams.encoders.gaps <= GAPS_PRINTED {
-                eprintln!(
+                errln!(
                     "sabr soak: {missing} encoder sample(s) lost before seq {}",
                     sample.seq
                 );

@@ -10,6 +10,7 @@
 //! when an executable is missing. Anywhere else (an installed `sabr`, `--bin-dir`) nothing is
 //! built and a missing executable stays the launch file's "not found" error.
 
+use crate::errln;
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -115,9 +116,9 @@ pub fn build_graph_executables(file: &Path, bin_dir: &Path) -> anyhow::Result<()
             .join(" ")
     );
     if missing.is_empty() {
-        eprintln!("sabr launch: bringing the graph's executables up to date: {shown}");
+        errln!("sabr launch: bringing the graph's executables up to date: {shown}");
     } else {
-        eprintln!(
+        errln!(
             "sabr launch: building the graph's executables ({} not built yet): {shown}",
             missing.join(", ")
         );
@@ -125,7 +126,7 @@ pub fn build_graph_executables(file: &Path, bin_dir: &Path) -> anyhow::Result<()
     let status = match command.status() {
         Ok(status) => status,
         Err(error) => {
-            eprintln!(
+            errln!(
                 "sabr launch: cannot run {} ({error}); launching with what is built",
                 Path::new(&cargo).display()
             );

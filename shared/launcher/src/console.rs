@@ -8,6 +8,11 @@
 //! or `grep` end; the command still finishes its work and writes its files, and exits as it
 //! would have. Any other write error (a full disk behind `> file`) also silences the output,
 //! and is kept for [`finish`], which the command's `main` calls last to report it.
+//!
+//! Standard error (progress lines, warnings, the final error) goes the same way through
+//! [`errln!`](crate::errln), except that its failures are not reported: there is nowhere left
+//! to report them. That matters most to `sabr launch 2>&1 | head`: the launcher supervising a
+//! graph must not die because the terminal's reader went away.
 
 use std::io::{self, Write};
 use std::sync::Mutex;
@@ -45,18 +50,35 @@ impl State {
     }
 }
 
-/// The state of this process's standard output.
-static STDOUT: Mutex<State> = Mutex::new(State {
+/// Nothing written yet.
+const UNTOUCHED: State = State {
     reader_left: false,
     failed: None,
-});
+};
 
-fn with_state<R>(f: impl FnOnce(&mut State) -> R) -> R {
+/// The state of this process's standard output.
+static STDOUT: Mutex<State> = Mutex::new(UNTOUCHED);
+/// The state of this process's standard error.
+static STDERR: Mutex<State> = Mutex::new(UNTOUCHED);
+
+fn with<R>(stream: &Mutex<State>, f: impl FnOnce(&mut State) -> R) -> R {
     // A panic elsewhere while the lock was held cannot leave `State` inconsistent.
-    let mut state = STDOUT
+    let mut state = stream
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner());
     f(&mut state)
+}
+
+fn with_state<R>(f: impl FnOnce(&mut State) -> R) -> R {
+    with(&STDOUT, f)
+}
+
+/// Writes `text` to standard error (used by [`errln!`](crate::errln)); a closed or failing
+/// standard error silences the rest, unreported.
+pub fn write_err_str(text: &str) {
+    with(&STDERR, |state| {
+        state.write(&mut io::stderr().lock(), text.as_bytes())
+    });
 }
 
 /// Writes `text` to standard output (used by [`out!`](crate::out) and
@@ -110,6 +132,14 @@ macro_rules! outln {
     };
     ($($arg:tt)*) => {
         $crate::console::write_str(&::std::format!("{}\n", ::std::format_args!($($arg)*)))
+    };
+}
+
+/// `eprintln!` to standard error through [`console`](crate::console): never panics.
+#[macro_export]
+macro_rules! errln {
+    ($($arg:tt)*) => {
+        $crate::console::write_err_str(&::std::format!("{}\n", ::std::format_args!($($arg)*)))
     };
 }
 

@@ -150,19 +150,19 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
             })
         })
         .transpose()?;
-    eprintln!(
+    errln!(
         "sabr launch: {} — {} nodes, domain {domain}, run directory {}",
         args.file.display(),
         graph.nodes.len(),
         run.path().display()
     );
     if let Some(bound) = &wake_latency {
-        eprintln!(
+        errln!(
             "sabr launch: CPU wake-up latency held at ≤ {} µs while the graph runs",
             bound.latency_us
         );
         if !bound.polled_cpus().is_empty() {
-            eprintln!(
+            errln!(
                 "sabr launch: this kernel has no cpuidle driver to obey it: polling idle CPUs \
                  {:?} from the launcher (SCHED_IDLE threads)",
                 bound.polled_cpus()
@@ -177,7 +177,7 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     let stolen = cpu_at_start.zip(CpuTimes::now().ok());
     if let Some(share) = stolen.and_then(|(start, end)| end.steal_share_since(&start)) {
         if share >= steal::NOTABLE_STEAL {
-            eprintln!(
+            errln!(
                 "sabr launch: the hypervisor took {:.0} % of the CPUs' time while the graph ran \
                  (steal): late wake-ups and skipped samples in the logs are the host's",
                 share * 100.0
@@ -187,9 +187,9 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<ExitCode> {
     drop(wake_latency);
     let left = sabr_node::release_domain(&domain);
     if !left.is_empty() {
-        eprintln!("sabr launch: iceoryx2 files of domain {domain} left behind: {left:?}");
+        errln!("sabr launch: iceoryx2 files of domain {domain} left behind: {left:?}");
     }
-    eprintln!(
+    errln!(
         "sabr launch: {} — logs in {}",
         if reason.is_success() {
             "finished"

@@ -3,6 +3,7 @@
 //! and every line is printed plainly to stderr as before, so tests and CI that parse the
 //! output see the same lines.
 
+use crate::errln;
 use std::fmt::Display;
 use std::io::IsTerminal;
 use std::time::Duration;
@@ -58,7 +59,7 @@ impl Progress {
     pub fn line(&self, line: impl Display) {
         match &self.bar {
             Some(bar) => bar.println(line.to_string()),
-            None => eprintln!("{line}"),
+            None => errln!("{line}"),
         }
     }
 

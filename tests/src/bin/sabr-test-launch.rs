@@ -13,10 +13,12 @@ struct Cli {
 }
 
 fn main() -> ExitCode {
-    match sabr_launcher::run(&Cli::parse().args) {
+    let result = sabr_launcher::run(&Cli::parse().args);
+    // A write error of what the command printed fails it, after the work it did.
+    match result.and_then(|code| sabr_launcher::console::finish().map(|()| code)) {
         Ok(code) => code,
         Err(error) => {
-            eprintln!("sabr: {error:#}");
+            sabr_launcher::errln!("sabr: {error:#}");
             ExitCode::FAILURE
         }
     }
