@@ -2,7 +2,6 @@
 
 use clap::{Parser, Subcommand};
 use sabr_lab::{bench, soak};
-use sabr_launcher::errln;
 use std::process::ExitCode;
 
 /// The performance lab of the SABR graph.
@@ -27,10 +26,5 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Soak(args) => soak::run(&args),
     };
-    // A write error of what the command printed fails it, after the work it did.
-    let result = result.and_then(|code| sabr_launcher::console::finish().map(|()| code));
-    result.unwrap_or_else(|error| {
-        errln!("sabr-lab: {error:#}");
-        ExitCode::FAILURE
-    })
+    sabr_launcher::console::exit_status("sabr-lab", result)
 }

@@ -3,7 +3,6 @@
 //! per input row; a row that has no solution becomes `error,<reason>` and makes the command
 //! exit with a failure status after all rows are written.
 
-use sabr_launcher::errln;
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -12,7 +11,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::ArgGroup;
 use glam::DVec3;
-use sabr_launcher::console;
+use sabr_launcher::{console, errln};
 use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{
     forward, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,

@@ -1,7 +1,6 @@
 //! `sabr`: the launcher and the user commands of the SABR biopsy-robot project.
 
 use clap::{Parser, Subcommand};
-use sabr_launcher::errln;
 
 mod calibrate_cmd;
 mod evaluate_cmd;
@@ -63,13 +62,5 @@ fn main() -> std::process::ExitCode {
         Command::Soak(args) => lab_cmd::run("soak", &args),
         Command::Export(args) => export_cmd::run(&args),
     };
-    // A write error of what the command printed fails it, after the work it did.
-    let result = result.and_then(|code| launcher::console::finish().map(|()| code));
-    match result {
-        Ok(code) => code,
-        Err(error) => {
-            errln!("sabr: {error:#}");
-            std::process::ExitCode::FAILURE
-        }
-    }
+    launcher::console::exit_status("sabr", result)
 }

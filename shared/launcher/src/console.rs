@@ -15,10 +15,11 @@
 //! graph must not die because the terminal's reader went away.
 
 use std::io::{self, Write};
+use std::process::ExitCode;
 use std::sync::Mutex;
 
-/// What became of standard output so far.
-#[derive(Debug, Default)]
+/// What became of one standard stream so far.
+#[derive(Debug)]
 struct State {
     /// The reader left (`EPIPE`): nothing more is written, and that is not an error.
     reader_left: bool,
@@ -69,8 +70,17 @@ fn with<R>(stream: &Mutex<State>, f: impl FnOnce(&mut State) -> R) -> R {
     f(&mut state)
 }
 
-fn with_state<R>(f: impl FnOnce(&mut State) -> R) -> R {
-    with(&STDOUT, f)
+/// Writes `bytes` to standard output unless it was silenced.
+fn write_out(bytes: &[u8]) {
+    with(&STDOUT, |state| {
+        state.write(&mut io::stdout().lock(), bytes)
+    });
+}
+
+/// Writes `text` to standard output (used by [`out!`](crate::out) and
+/// [`outln!`](crate::outln)); see the module documentation for failures.
+pub fn write_str(text: &str) {
+    write_out(text.as_bytes());
 }
 
 /// Writes `text` to standard error (used by [`errln!`](crate::errln)); a closed or failing
@@ -81,22 +91,30 @@ pub fn write_err_str(text: &str) {
     });
 }
 
-/// Writes `text` to standard output (used by [`out!`](crate::out) and
-/// [`outln!`](crate::outln)); see the module documentation for failures.
-pub fn write_str(text: &str) {
-    with_state(|state| state.write(&mut io::stdout().lock(), text.as_bytes()));
-}
-
 /// True once nothing more will be written (the reader left, or a write failed): a command
 /// that only prints (`sabr fk`) may stop early.
 pub fn silenced() -> bool {
-    with_state(|state| state.reader_left || state.failed.is_some())
+    with(&STDOUT, |state| state.reader_left || state.failed.is_some())
 }
 
 /// The first write error of standard output other than a reader who left, as an error naming
-/// standard output; `Ok` otherwise. The command's `main` calls it after the command ran.
+/// standard output; `Ok` otherwise.
 pub fn finish() -> anyhow::Result<()> {
-    with_state(State::finish)
+    with(&STDOUT, State::finish)
+}
+
+/// The exit status of the command-line tool `program` (`sabr`, `sabr-lab`) given what its
+/// command returned: a standard-output write error ([`finish`]) fails a command that
+/// succeeded, after the work it did; an error is printed as `program: error` on standard
+/// error. The tools' `main` ends with it.
+pub fn exit_status(program: &str, result: anyhow::Result<ExitCode>) -> ExitCode {
+    match result.and_then(|code| finish().map(|()| code)) {
+        Ok(code) => code,
+        Err(error) => {
+            write_err_str(&format!("{program}: {error:#}\n"));
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Standard output as an [`io::Write`] for writers that stream to it (a CSV writer): every
@@ -107,7 +125,7 @@ pub struct Stdout;
 
 impl Write for Stdout {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        with_state(|state| state.write(&mut io::stdout().lock(), buf));
+        write_out(buf);
         Ok(buf.len())
     }
 
@@ -179,7 +197,7 @@ mod tests {
 
     #[test]
     fn a_reader_who_left_silences_the_output_without_an_error() {
-        let mut state = State::default();
+        let mut state = UNTOUCHED;
         let mut out = failing(1, io::ErrorKind::BrokenPipe);
         state.write(&mut out, b"first\n");
         state.write(&mut out, b"second\n");
@@ -193,7 +211,7 @@ mod tests {
 
     #[test]
     fn another_write_error_silences_the_output_and_is_reported_once() {
-        let mut state = State::default();
+        let mut state = UNTOUCHED;
         let mut out = failing(0, io::ErrorKind::StorageFull);
         state.write(&mut out, b"lost\n");
         out.accepts = 1;

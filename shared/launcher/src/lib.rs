@@ -94,7 +94,7 @@ fn print_start_order(args: &LaunchArgs, graph: &spec::GraphSpec) {
             node.exec.display()
         );
     }
-    out!("{text}");
+    console::write_str(&text);
 }
 
 /// The directory of the node executables: `dir` when given, else the directory of the running

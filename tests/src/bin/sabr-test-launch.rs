@@ -14,12 +14,5 @@ struct Cli {
 
 fn main() -> ExitCode {
     let result = sabr_launcher::run(&Cli::parse().args);
-    // A write error of what the command printed fails it, after the work it did.
-    match result.and_then(|code| sabr_launcher::console::finish().map(|()| code)) {
-        Ok(code) => code,
-        Err(error) => {
-            sabr_launcher::errln!("sabr: {error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    sabr_launcher::console::exit_status("sabr", result)
 }
