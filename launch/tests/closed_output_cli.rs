@@ -57,6 +57,13 @@ fn sim_record_finishes_its_recording_when_the_reader_left() {
     record_with_reader_gone(&work.path().join("recording"));
 }
 
+/// The nominal robot's `robot.toml` in `dir`.
+fn nominal_robot(dir: &Path) -> std::path::PathBuf {
+    let path = dir.join("robot.toml");
+    std::fs::write(&path, RobotParams::nominal().to_toml_string()).unwrap();
+    path
+}
+
 /// A joints CSV of `rows` rows near the contract's first test vector.
 fn joints_csv(dir: &Path, rows: usize) -> std::path::PathBuf {
     let mut csv = "q1,q2,q3,q4,q5\n".to_owned();
@@ -72,8 +79,7 @@ fn joints_csv(dir: &Path, rows: usize) -> std::path::PathBuf {
 #[test]
 fn fk_ends_quietly_when_the_reader_left() {
     let work = tempfile::tempdir().unwrap();
-    let robot = work.path().join("robot.toml");
-    std::fs::write(&robot, RobotParams::nominal().to_toml_string()).unwrap();
+    let robot = nominal_robot(work.path());
     // More rows than a pipe buffers, so the command meets the closed pipe mid-stream.
     let joints = joints_csv(work.path(), 20_000);
     let output = run_with_reader_gone(&["fk", "--params", arg(&robot), "--joints", arg(&joints)]);
@@ -84,8 +90,7 @@ fn fk_ends_quietly_when_the_reader_left() {
 #[test]
 fn a_full_standard_output_is_an_error_naming_it() {
     let work = tempfile::tempdir().unwrap();
-    let robot = work.path().join("robot.toml");
-    std::fs::write(&robot, RobotParams::nominal().to_toml_string()).unwrap();
+    let robot = nominal_robot(work.path());
     let joints = joints_csv(work.path(), 10);
     let full = std::fs::OpenOptions::new()
         .write(true)
