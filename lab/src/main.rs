@@ -26,5 +26,5 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(&args),
         Command::Soak(args) => soak::run(&args),
     };
-    sabr_launcher::console::exit_status("sabr-lab", result)
+    sabr_node::console::exit_status("sabr-lab", result)
 }

@@ -4,7 +4,7 @@
 //! arm described by URDF gives `params.json` (and `params-<step>.json` per step),
 //! `report.json` and `report.html` (docs/measured-data.md).
 
-use sabr_launcher::{out, outln};
+use sabr_node::{out, outln};
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -3,7 +3,7 @@
 //! another poses-v1 recording of the same robot. `--refit-setup` registers and fits only
 //! the set-up frames (a new instrument placement) and keeps everything else.
 
-use sabr_launcher::outln;
+use sabr_node::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 

@@ -3,7 +3,7 @@
 //! offsets of the homing phase, or with a calibrated `params.toml` and the residual per
 //! tracker frame.
 
-use sabr_launcher::outln;
+use sabr_node::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;

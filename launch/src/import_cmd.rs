@@ -18,7 +18,7 @@
 //!   `T_F_TM` is its inverse (the probe sits 109 mm out along the flange's z axis).
 //! - The commanded `Goal` poses and the spreadsheet-mangled time stamps are not imported.
 
-use sabr_launcher::{errln, outln};
+use sabr_node::{errln, outln};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

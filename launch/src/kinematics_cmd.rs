@@ -11,12 +11,12 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::ArgGroup;
 use glam::DVec3;
-use sabr_launcher::{console, errln};
 use sabr_model::realtime::RealtimeGeometry;
 use sabr_model::{
     forward, DirectionTracker, Geometry, JointMotion, Joints, RobotParams,
     DIRECTION_DEAD_BAND_COUNTS, HOME_JOINTS,
 };
+use sabr_node::{console, errln};
 
 /// Arguments of `sabr fk`.
 #[derive(Debug, clap::Args)]

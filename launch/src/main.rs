@@ -62,5 +62,5 @@ fn main() -> std::process::ExitCode {
         Command::Soak(args) => lab_cmd::run("soak", &args),
         Command::Export(args) => export_cmd::run(&args),
     };
-    launcher::console::exit_status("sabr", result)
+    sabr_node::console::exit_status("sabr", result)
 }

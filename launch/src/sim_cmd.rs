@@ -2,7 +2,7 @@
 //! recording (format v1) to DIR and the truth (true parameters, effects, true validation
 //! poses, tracker frame timing) to DIR/truth/.
 
-use sabr_launcher::outln;
+use sabr_node::outln;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;

@@ -6,11 +6,6 @@ use sabr_lab::bench::pong::{self, PongArgs};
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    match pong::run(&PongArgs::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            eprintln!("sabr-pong: {error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    let result = pong::run(&PongArgs::parse()).map(|()| ExitCode::SUCCESS);
+    sabr_node::console::exit_status("sabr-pong", result)
 }

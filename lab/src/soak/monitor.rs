@@ -4,7 +4,7 @@
 
 use super::processes::{Reading, Tracked};
 use super::streams::SeqCheck;
-use sabr_launcher::errln;
+use sabr_node::errln;
 use sabr_node::msgs::{services, EncoderSample, LifecycleState, MatchedSample, TrackerFrame};
 use sabr_node::{Domain, GraphObserver, NodeError, NodeRuntime, Subscriber};
 use std::collections::BTreeMap;

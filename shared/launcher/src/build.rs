@@ -10,8 +10,8 @@
 //! when an executable is missing. Anywhere else (an installed `sabr`, `--bin-dir`) nothing is
 //! built and a missing executable stays the launch file's "not found" error.
 
-use crate::errln;
 use anyhow::Context;
+use sabr_node::errln;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

@@ -10,7 +10,6 @@
 //! use it.
 
 mod build;
-pub mod console;
 mod out_dir;
 pub mod placement;
 pub mod progress;
@@ -26,7 +25,7 @@ pub use run_dir::RunDir;
 pub use supervisor::{describe, StopReason};
 
 use anyhow::Context;
-use sabr_node::Domain;
+use sabr_node::{console, errln, Domain};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;

@@ -3,7 +3,7 @@
 //! and every line is printed plainly to stderr as before, so tests and CI that parse the
 //! output see the same lines.
 
-use crate::errln;
+use sabr_node::errln;
 use std::fmt::Display;
 use std::io::IsTerminal;
 use std::time::Duration;

@@ -8,6 +8,8 @@
 //! - [`Deadline`]: notices a stalled or dead peer while waiting.
 //! - [`GraphObserver`]: watches the lifecycle of all nodes of a domain (used by the launcher).
 //! - [`monotonic_ns`]: the clock of every `t_ns`.
+//! - [`console`]: standard output and error that never panic (`out!`, `outln!`, `errln!`), for
+//!   the services and the command-line tools alike.
 //!
 //! A consumer that wakes on data and notices a stalled producer:
 //!
@@ -33,6 +35,7 @@
 //! }
 //! ```
 
+pub mod console;
 mod deadline;
 mod domain;
 pub mod doorbell;

@@ -8,7 +8,9 @@
 //! 2. the outcome maps to one exit convention: any [`Exit`] is success (exit status 0), an
 //!    error is logged with its whole chain of causes (and printed on stdout as
 //!    `<service>: FAILED: <causes>`) and is a failure (exit status 1); a bad command line is
-//!    clap's usage error (exit status 2).
+//!    clap's usage error (exit status 2). Standard output goes through [`crate::console`]: a
+//!    service whose output failed (its reader left, its log's disk is full) goes on working,
+//!    and logs the failure as it leaves instead of panicking.
 //!
 //! The helpers every service needed a copy of live here once: [`in_run_dir`] (where a file
 //! goes when no flag names it), [`StatusTimer`] (the status line every [`STATUS_PERIOD`]) and
@@ -39,6 +41,9 @@ pub fn service_main<A: clap::Parser>(
 
 /// The exit status of a service's outcome; an error is logged first.
 fn exit_code(service: &str, outcome: anyhow::Result<Exit>) -> ExitCode {
+    if let Err(error) = crate::console::finish() {
+        tracing::warn!(service, "{error:#}");
+    }
     match outcome {
         Ok(exit) => {
             tracing::debug!(service, ?exit, "leaving");
@@ -47,7 +52,7 @@ fn exit_code(service: &str, outcome: anyhow::Result<Exit>) -> ExitCode {
         Err(error) => {
             tracing::error!(service, "{error:#}");
             // Also on stdout, which the launcher shows for a node marked `console`.
-            println!("{service}: FAILED: {error:#}");
+            crate::outln!("{service}: FAILED: {error:#}");
             ExitCode::FAILURE
         }
     }

@@ -14,5 +14,5 @@ struct Cli {
 
 fn main() -> ExitCode {
     let result = sabr_launcher::run(&Cli::parse().args);
-    sabr_launcher::console::exit_status("sabr", result)
+    sabr_node::console::exit_status("sabr", result)
 }

@@ -39,7 +39,7 @@ fn main() -> ExitCode {
     match run(&args) {
         Ok(code) => code,
         Err(error) => {
-            eprintln!("sabr-test-node: {error}");
+            sabr_node::errln!("sabr-test-node: {error}");
             ExitCode::FAILURE
         }
     }

@@ -31,7 +31,9 @@ use sabr_msgs::{
     services, EncoderSample, FixedString, MotionState, MotionStatus, MotorSetpoint,
     ParameterSetAnnouncement, PhaseMark, RigTruth, TrackerFrame,
 };
-use sabr_node::{monotonic_ns, Exit, LoopCtx, NodeRuntime, Publisher, Subscriber, Waitable};
+use sabr_node::{
+    monotonic_ns, out, outln, Exit, LoopCtx, NodeRuntime, Publisher, Subscriber, Waitable,
+};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -238,7 +240,7 @@ impl Calibrator<'_> {
             frames.iter().for_each(|f| test.frame(*f));
         }
         for mark in &marks {
-            println!(
+            outln!(
                 "phase {} done ({:.1} s)",
                 mark.phase.as_str(),
                 (mark.t_end_ns - mark.t_start_ns) as f64 * 1e-9
@@ -267,7 +269,7 @@ impl Calibrator<'_> {
         let shown = (status.state, status.reason);
         if self.last_status != Some(shown) {
             self.last_status = Some(shown);
-            println!("motion {:?}: {}", status.state, status.reason.as_str());
+            outln!("motion {:?}: {}", status.state, status.reason.as_str());
         }
     }
 
@@ -366,9 +368,11 @@ impl Calibrator<'_> {
         };
         let recording = self.session.to_recording(dir);
         tracing::info!(?stats, "session complete; calibrating");
-        println!(
+        outln!(
             "session complete: {} encoder samples, {} tracker frames, {} phases; calibrating…",
-            stats.encoder_samples, stats.tracker_frames, stats.phases
+            stats.encoder_samples,
+            stats.tracker_frames,
+            stats.phases
         );
         write_json(
             &self.out.join("live.json"),
@@ -405,11 +409,11 @@ impl Calibrator<'_> {
             path,
         })?;
         let summary = summary(&calibration, started.elapsed());
-        print!("{summary}");
+        out!("{summary}");
         write_text(&self.out.join("summary.txt"), &summary)?;
         tracing::info!(version = self.args.version, path = %params.display(), "parameter set announced");
         self.stage = if self.line_test.is_some() {
-            println!(
+            outln!(
                 "waiting for the straight-line test (phase {})…",
                 self.args.line_phase
             );
@@ -467,7 +471,7 @@ fn summary(calibration: &Calibration, took: Duration) -> String {
 fn finish_line_test(out: &Path, summary: &str, report: &LineTestReport) -> anyhow::Result<()> {
     write_json(&out.join("line_test.json"), report)?;
     let text = report.text();
-    print!("{text}");
+    out!("{text}");
     write_text(&out.join("summary.txt"), &format!("{summary}{text}"))
 }
 

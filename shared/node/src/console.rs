@@ -1,13 +1,14 @@
-//! Standard output of the command-line tools (`sabr`, `sabr-lab`): what they print for a
-//! reader, written so that a reader who leaves early (`sabr calibrate … | head`) ends the
-//! printing, never the work.
+//! Standard output and error of every SABR process — the command-line tools (`sabr`,
+//! `sabr-lab`) and the services alike: what they print for a reader, written so that a reader
+//! who leaves early (`sabr calibrate … | head`) ends the printing, never the work.
 //!
 //! Rust ignores `SIGPIPE`, so a write to a closed pipe fails with `EPIPE`, and `println!`
 //! panics on it: a calibration piped into `head` died after its first lines, before its
 //! report was written. Here a closed pipe silences the rest of the output quietly, as `git`
-//! or `grep` end; the command still finishes its work and writes its files, and exits as it
-//! would have. Any other write error (a full disk behind `> file`) also silences the output,
-//! and is kept for [`finish`], which the command's `main` calls last to report it.
+//! or `grep` end; the process still finishes its work and writes its files, and exits as it
+//! would have. Any other write error (a full disk behind `> file`, or behind a service's log)
+//! also silences the output, and is kept for [`finish`]: a command-line tool's `main` reports
+//! it last ([`exit_status`]), a service logs it as it leaves ([`crate::service_main`]).
 //!
 //! Standard error (progress lines, warnings, the final error) goes the same way through
 //! [`errln!`](crate::errln), except that its failures are not reported: there is nowhere left
