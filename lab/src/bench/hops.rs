@@ -320,6 +320,59 @@ pub fn transport_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck
         .collect()
 }
 
+/// The floor under each payload's hop at the graph's rate: the bare `futex` round trip paced
+/// as the graph sends that payload (`futex-paced/<payload>`), judged by the goals of the
+/// payload's event-driven hop — p99 below the `uds` round-trip p99, p50 within
+/// [`FUTEX_P50_FACTOR`] × the back-to-back `futex` round-trip p50. The floor wakes two
+/// processes in turn and carries nothing; so does the IK round trip (plus a solve), and so
+/// does tracker frame → matched sample (tracker → sync → subscriber, plus a match): a goal
+/// the floor misses is beyond any transport for those hops on this host at that rate. An
+/// encoder sample's hop wakes one process, so the floor only bounds it loosely.
+pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Summary, Vec<GoalCheck>)> {
+    Payload::ALL
+        .iter()
+        .filter_map(|&payload| {
+            let floor = summary_of(measured, paced_name(Transport::Futex, payload)).ok()?;
+            let uds = baseline(measured, Transport::Uds, payload).ok()?;
+            let futex = baseline(measured, Transport::Futex, payload).ok()?;
+            let goals = vec![
+                GoalCheck {
+                    goal: format!(
+                        "p99 {} < uds p99 {}",
+                        format_ns(floor.p99),
+                        format_ns(uds.p99)
+                    ),
+                    outcome: Outcome::of(floor.p99 < uds.p99),
+                },
+                GoalCheck {
+                    goal: format!(
+                        "p50 {} ≤ {FUTEX_P50_FACTOR}× futex p50 {}",
+                        format_ns(floor.p50),
+                        format_ns(futex.p50)
+                    ),
+                    outcome: Outcome::of(floor.p50 as f64 <= FUTEX_P50_FACTOR * futex.p50 as f64),
+                },
+            ];
+            Some((payload, floor, goals))
+        })
+        .collect()
+}
+
+/// The printed table of [`floor_checks`]; empty without the paced and back-to-back baselines.
+pub fn floor_table(checks: &[(Payload, Summary, Vec<GoalCheck>)]) -> String {
+    let mut text = String::new();
+    for (payload, _, goals) in checks {
+        let goals: Vec<String> = goals.iter().map(GoalCheck::describe).collect();
+        let _ = writeln!(
+            text,
+            "  {:<33} {}",
+            paced_name(Transport::Futex, *payload),
+            goals.join("; ")
+        );
+    }
+    text
+}
+
 /// The printed table of [`transport_checks`]; empty without both baselines.
 pub fn transport_table(checks: &[(Payload, Vec<GoalCheck>)]) -> String {
     let mut text = String::new();
@@ -443,6 +496,38 @@ mod tests {
         );
         assert!(
             lines[2].ends_with("not measured: graph not running"),
+            "{table}"
+        );
+    }
+
+    #[test]
+    fn the_paced_floor_is_judged_by_its_payloads_hop_goals() {
+        let measured = [
+            constant("futex-paced/tracker-frame", 9_000),
+            constant("futex/tracker-frame", 3_000),
+            constant("uds/tracker-frame", 8_000),
+            constant("futex-paced/ik", 4_000),
+            constant("futex/ik", 3_000),
+            constant("uds/ik", 6_000),
+            constant("futex-paced/encoder-sample", 4_000),
+            constant("futex/encoder-sample", 3_000),
+        ];
+        let checks = floor_checks(&measured);
+        let payloads: Vec<Payload> = checks.iter().map(|(payload, _, _)| *payload).collect();
+        assert_eq!(
+            payloads,
+            [Payload::TrackerFrame, Payload::Ik],
+            "encoder-sample has no uds baseline"
+        );
+        let outcomes = |index: usize| -> Vec<Outcome> {
+            checks[index].2.iter().map(|g| g.outcome.clone()).collect()
+        };
+        assert_eq!(outcomes(0), [Outcome::Missed, Outcome::Missed]);
+        assert_eq!(outcomes(1), [Outcome::Met, Outcome::Met]);
+        let table = floor_table(&checks);
+        assert!(
+            table.contains("futex-paced/tracker-frame")
+                && table.contains("p50 9.007 µs ≤ 2× futex p50 3.001 µs: MISSED"),
             "{table}"
         );
     }

@@ -266,6 +266,16 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
              rate):"
         );
         out!("{}", hops::ratio_table(&hop_rows));
+        let floor_checks = hops::floor_checks(&results.measurements);
+        if !floor_checks.is_empty() {
+            outln!(
+                "\nthe floor at the graph's rates: the bare futex round trip paced as the graph \
+                 sends each payload, judged by the goals of that payload's hop (a goal the \
+                 floor misses is beyond any transport on this host for tracker frame → matched \
+                 and the IK round trip, which wake two processes in turn as it does):"
+            );
+            out!("{}", hops::floor_table(&floor_checks));
+        }
     }
     for line in &results.unavailable {
         outln!("{line}");
