@@ -33,6 +33,19 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
+/// The eight service binaries of the shipped graphs, `sabr-<name>`, by the node name each
+/// gives itself.
+pub const SERVICES: [&str; 8] = [
+    "rig",
+    "encoders",
+    "tracker",
+    "sync",
+    "recorder",
+    "ik",
+    "calibrator",
+    "motion",
+];
+
 /// The median interval between consecutive time stamps (ns; the upper middle of an even
 /// count): a stream's period whether or not some instants were skipped.
 pub fn median_interval_ns(stamps: &[i64]) -> i64 {

@@ -23,16 +23,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(180);
 /// The straight-line test's goal: tip path error against the truth, RMS (mm).
 const PATH_ERROR_GOAL_MM: f64 = 0.3;
 /// Every node of the graph (one log each).
-const NODES: [&str; 8] = [
-    "rig",
-    "encoders",
-    "tracker",
-    "sync",
-    "recorder",
-    "ik",
-    "calibrator",
-    "motion",
-];
+const NODES: [&str; 8] = sabr_integration_tests::SERVICES;
 
 fn read_json(path: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path)

@@ -3,19 +3,8 @@
 //! shows for a `console` node) and in its log, and exits with status 1 — also when nobody
 //! reads its standard output any more, where a `println!` would have panicked (status 101).
 
+use sabr_integration_tests::SERVICES;
 use std::process::{Command, Output, Stdio};
-
-/// Every service binary, by the name it gives itself.
-const SERVICES: [&str; 8] = [
-    "rig",
-    "encoders",
-    "tracker",
-    "sync",
-    "recorder",
-    "ik",
-    "calibrator",
-    "motion",
-];
 
 /// A domain name the node runtime refuses, so that every service fails at its start, before
 /// any iceoryx2 resource exists.

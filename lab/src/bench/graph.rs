@@ -32,22 +32,21 @@ pub const SETPOINTS_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/ben
 /// the motion node included, which the bench graphs lack.
 pub const SHIPPED_LAUNCH_FILE: &str = include_str!("../../../launch/graphs/sim-calibration.toml");
 
-/// A directory holding an empty stand-in executable `sabr-<node>` for every node of the
-/// shipped graphs, so that their launch files parse in tests.
+/// A directory holding an empty stand-in executable for every node executable the bench's
+/// launch files name (the shipped main job's included), so that they parse in tests.
 #[cfg(test)]
 pub fn stand_in_bin_dir() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
-    for node in [
-        "rig",
-        "encoders",
-        "tracker",
-        "sync",
-        "recorder",
-        "ik",
-        "calibrator",
-        "motion",
+    for file in [
+        SENSING_LAUNCH_FILE,
+        SETPOINTS_LAUNCH_FILE,
+        SHIPPED_LAUNCH_FILE,
     ] {
-        std::fs::write(dir.path().join(format!("sabr-{node}")), "").unwrap();
+        let graph: toml::Table = file.parse().unwrap();
+        for node in graph["node"].as_array().unwrap() {
+            let exec = node["exec"].as_str().unwrap();
+            std::fs::write(dir.path().join(exec), "").unwrap();
+        }
     }
     dir
 }
