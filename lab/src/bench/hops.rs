@@ -328,7 +328,7 @@ pub fn transport_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck
 /// does tracker frame → matched sample (tracker → sync → subscriber, plus a match): a goal
 /// the floor misses is beyond any transport for those hops on this host at that rate. An
 /// encoder sample's hop wakes one process, so the floor only bounds it loosely.
-pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Summary, Vec<GoalCheck>)> {
+pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck>)> {
     Payload::ALL
         .iter()
         .filter_map(|&payload| {
@@ -353,37 +353,34 @@ pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Summary, Vec<Goal
                     outcome: Outcome::of(floor.p50 as f64 <= FUTEX_P50_FACTOR * futex.p50 as f64),
                 },
             ];
-            Some((payload, floor, goals))
+            Some((payload, goals))
         })
         .collect()
 }
 
 /// The printed table of [`floor_checks`]; empty without the paced and back-to-back baselines.
-pub fn floor_table(checks: &[(Payload, Summary, Vec<GoalCheck>)]) -> String {
-    let mut text = String::new();
-    for (payload, _, goals) in checks {
-        let goals: Vec<String> = goals.iter().map(GoalCheck::describe).collect();
-        let _ = writeln!(
-            text,
-            "  {:<33} {}",
-            paced_name(Transport::Futex, *payload),
-            goals.join("; ")
-        );
-    }
-    text
+pub fn floor_table(checks: &[(Payload, Vec<GoalCheck>)]) -> String {
+    goal_table(checks, 33, |payload| paced_name(Transport::Futex, payload))
 }
 
 /// The printed table of [`transport_checks`]; empty without both baselines.
 pub fn transport_table(checks: &[(Payload, Vec<GoalCheck>)]) -> String {
+    goal_table(checks, 29, |payload| {
+        baseline_name(Transport::Doorbell, payload)
+    })
+}
+
+/// One indented line per payload: its `label`, padded to `width`, then its goals and their
+/// outcomes.
+fn goal_table(
+    checks: &[(Payload, Vec<GoalCheck>)],
+    width: usize,
+    label: impl Fn(Payload) -> String,
+) -> String {
     let mut text = String::new();
     for (payload, goals) in checks {
         let goals: Vec<String> = goals.iter().map(GoalCheck::describe).collect();
-        let _ = writeln!(
-            text,
-            "  doorbell/{:<20} {}",
-            payload.name(),
-            goals.join("; ")
-        );
+        let _ = writeln!(text, "  {:<width$} {}", label(*payload), goals.join("; "));
     }
     text
 }
@@ -513,14 +510,14 @@ mod tests {
             constant("futex/encoder-sample", 3_000),
         ];
         let checks = floor_checks(&measured);
-        let payloads: Vec<Payload> = checks.iter().map(|(payload, _, _)| *payload).collect();
+        let payloads: Vec<Payload> = checks.iter().map(|(payload, _)| *payload).collect();
         assert_eq!(
             payloads,
             [Payload::TrackerFrame, Payload::Ik],
             "encoder-sample has no uds baseline"
         );
         let outcomes = |index: usize| -> Vec<Outcome> {
-            checks[index].2.iter().map(|g| g.outcome.clone()).collect()
+            checks[index].1.iter().map(|g| g.outcome.clone()).collect()
         };
         assert_eq!(outcomes(0), [Outcome::Missed, Outcome::Missed]);
         assert_eq!(outcomes(1), [Outcome::Met, Outcome::Met]);

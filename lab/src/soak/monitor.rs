@@ -4,9 +4,8 @@
 
 use super::processes::{Reading, Tracked};
 use super::streams::SeqCheck;
-use sabr_node::errln;
 use sabr_node::msgs::{services, EncoderSample, LifecycleState, MatchedSample, TrackerFrame};
-use sabr_node::{Domain, GraphObserver, NodeError, NodeRuntime, Subscriber};
+use sabr_node::{errln, Domain, GraphObserver, NodeError, NodeRuntime, Subscriber};
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 

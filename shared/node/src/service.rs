@@ -39,12 +39,10 @@ pub fn service_main<A: clap::Parser>(
     exit_code(default_name, outcome)
 }
 
-/// The exit status of a service's outcome; an error is logged first.
+/// The exit status of a service's outcome; an error is logged first, and a standard output
+/// that failed on the way (its last line included) is logged last.
 fn exit_code(service: &str, outcome: anyhow::Result<Exit>) -> ExitCode {
-    if let Err(error) = crate::console::finish() {
-        tracing::warn!(service, "{error:#}");
-    }
-    match outcome {
+    let code = match outcome {
         Ok(exit) => {
             tracing::debug!(service, ?exit, "leaving");
             ExitCode::SUCCESS
@@ -55,7 +53,11 @@ fn exit_code(service: &str, outcome: anyhow::Result<Exit>) -> ExitCode {
             crate::outln!("{service}: FAILED: {error:#}");
             ExitCode::FAILURE
         }
+    };
+    if let Err(error) = crate::console::finish() {
+        tracing::warn!(service, "{error:#}");
     }
+    code
 }
 
 /// The path of a service's file or directory: `given` (from the flag `flag`) if set, else

@@ -35,14 +35,8 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match run(&args) {
-        Ok(code) => code,
-        Err(error) => {
-            sabr_node::errln!("sabr-test-node: {error}");
-            ExitCode::FAILURE
-        }
-    }
+    let result = run(&Args::parse()).map_err(anyhow::Error::from);
+    sabr_node::console::exit_status("sabr-test-node", result)
 }
 
 fn run(args: &Args) -> Result<ExitCode, sabr_node::NodeError> {
