@@ -5,26 +5,12 @@
 //! calibration takes about a minute); run it with
 //! `cargo test --release -p sabr --test calibrate_cli`.
 
+mod common;
+
+use common::{arg, run};
 use std::path::Path;
-use std::process::Command;
 
 use sabr_sim::Truth;
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let output = Command::new(env!("CARGO_BIN_EXE_sabr"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        output.status.success(),
-        String::from_utf8(output.stdout).unwrap(),
-        String::from_utf8(output.stderr).unwrap(),
-    )
-}
-
-fn arg(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 /// Data rows of a CSV (header skipped) as numbers.
 fn rows(text: &str) -> Vec<Vec<f64>> {

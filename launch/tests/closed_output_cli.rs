@@ -2,6 +2,9 @@
 //! printing quietly and the command still does its work; a failing output (a full disk) is
 //! an error naming standard output.
 
+mod common;
+
+use common::arg;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
@@ -17,10 +20,6 @@ fn run_with_reader_gone(args: &[&str]) -> Output {
         .stderr(Stdio::piped())
         .output()
         .unwrap()
-}
-
-fn arg(path: &Path) -> &str {
-    path.to_str().unwrap()
 }
 
 fn stderr(output: &Output) -> String {

@@ -1,24 +1,9 @@
 //! `sabr export mcap` end to end: `sabr sim record` → `sabr calibrate` → `sabr export mcap`
 //! with and without the calibration, and the residuals of the calibrated model read back.
 
-use std::path::Path;
-use std::process::Command;
+mod common;
 
-fn run(args: &[&str]) -> (bool, String, String) {
-    let output = Command::new(env!("CARGO_BIN_EXE_sabr"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        output.status.success(),
-        String::from_utf8(output.stdout).unwrap(),
-        String::from_utf8(output.stderr).unwrap(),
-    )
-}
-
-fn arg(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
+use common::{arg, run};
 
 /// The message count printed for `topic`.
 fn printed_count(stdout: &str, topic: &str) -> Option<u64> {

@@ -1,7 +1,9 @@
 //! `sabr fk` and `sabr ik` end to end: the built binary on files in a temporary directory.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
+
+use common::{arg, run};
+use std::path::PathBuf;
 
 use sabr_model::RobotParams;
 
@@ -48,22 +50,6 @@ impl Workspace {
     fn path(&self, name: &str) -> PathBuf {
         self.dir.path().join(name)
     }
-}
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let output = Command::new(env!("CARGO_BIN_EXE_sabr"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        output.status.success(),
-        String::from_utf8(output.stdout).unwrap(),
-        String::from_utf8(output.stderr).unwrap(),
-    )
-}
-
-fn arg(path: &Path) -> &str {
-    path.to_str().unwrap()
 }
 
 /// The data rows of a CSV output as numbers (header checked).
