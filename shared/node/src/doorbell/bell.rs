@@ -186,8 +186,10 @@ impl Drop for Inbox {
 }
 
 /// How long a producer rings the consumer ports it read last before it reads them again
-/// although their number did not change (a consumer that restarted between two sends).
-const CONSUMERS_REFRESH: Duration = Duration::from_millis(20);
+/// although their number did not change (a consumer that restarted between two sends). The
+/// read copies iceoryx2's port list to the heap: the one allocation a send of ours adds to
+/// iceoryx2's own, at most once per this period.
+pub const CONSUMERS_REFRESH: Duration = Duration::from_millis(20);
 
 /// One consumer port a producer may ring: its node, its event id, and its port id (a server
 /// answers one client of several).

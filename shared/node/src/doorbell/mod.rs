@@ -28,6 +28,7 @@
 mod bell;
 mod futex;
 
+pub use bell::CONSUMERS_REFRESH;
 pub(crate) use bell::{Bell, Inbox, Ringer};
 
 use core::fmt::Debug;
