@@ -172,8 +172,9 @@ pub struct RatioRow {
     pub p50_p99_ns: Result<(u64, u64), String>,
     /// Hop p50 / `futex` round-trip p50 of the same payload.
     pub p50_vs_futex: Option<f64>,
-    /// Hop p50 / `futex-paced` round-trip p50 of the same payload: against a floor as cold as
-    /// the hop (no goal; it shows how much of the first ratio the cold path explains).
+    /// Hop p50 / `futex-paced` round-trip p50 of the same payload: against a floor that goes
+    /// cold at the hop's rate (no goal; it shows how much of the first ratio a cold path
+    /// explains).
     pub p50_vs_paced_futex: Option<f64>,
     /// Hop p99 / `uds` round-trip p99 of the same payload.
     pub p99_vs_uds: Option<f64>,
@@ -324,10 +325,12 @@ pub fn transport_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck
 /// as the graph sends that payload (`futex-paced/<payload>`), judged by the goals of the
 /// payload's event-driven hop — p99 below the `uds` round-trip p99, p50 within
 /// [`FUTEX_P50_FACTOR`] × the back-to-back `futex` round-trip p50. The floor wakes two
-/// processes in turn and carries nothing; so does the IK round trip (plus a solve), and so
-/// does tracker frame → matched sample (tracker → sync → subscriber, plus a match): a goal
-/// the floor misses is beyond any transport for those hops on this host at that rate. An
-/// encoder sample's hop wakes one process, so the floor only bounds it loosely.
+/// processes in turn, carries nothing, and runs nothing in between: both are cold at that
+/// rate. A goal it misses is out of reach of a transport whose path goes cold between
+/// messages, not of a hop whose processes run in between (the sync wakes at 1 kHz for the
+/// encoder samples) or warm their path before a message (`sabr_node::Publisher::warm`):
+/// tracker frame → matched, two wake-ups with a frame, a match and a matched sample, has
+/// gone below it since its senders warm.
 pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck>)> {
     Payload::ALL
         .iter()

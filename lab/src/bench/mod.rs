@@ -269,9 +269,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
         if !floor_checks.is_empty() {
             outln!(
                 "\nthe floor at the graph's rates: the bare futex round trip paced as the graph \
-                 sends each payload, judged by the goals of that payload's hop (a goal the \
-                 floor misses is beyond any transport on this host for tracker frame → matched \
-                 and the IK round trip, which wake two processes in turn as it does):"
+                 sends each payload, both processes cold, judged by the goals of that \
+                 payload's hop (a goal it misses is out of reach of a transport whose path \
+                 goes cold between messages; a hop whose path stays warm can go below it):"
             );
             out!("{}", hops::floor_table(&floor_checks));
         }

@@ -112,7 +112,9 @@ impl Tracking {
         handles: &HandleMap,
     ) -> anyhow::Result<()> {
         let retried_before = driver.stats().retried_polls;
-        let next = driver.next_frame();
+        // The frame comes with one of the polls, 50 ms after the last one: warmed before each
+        // poll, its send runs from the cache, not from memory the core's other work evicted.
+        let next = driver.next_frame_with(|| out.warm());
         let retried = driver.stats().retried_polls - retried_before;
         if retried > 0 {
             tracing::warn!(

@@ -376,6 +376,16 @@ impl NdiDriver {
     /// is [`DriverError::Timeout`]. No new frame within `stall_timeout` of the last one (or of
     /// TSTART) is [`DriverError::Stalled`].
     pub fn next_frame(&mut self) -> Result<Stamped, DriverError> {
+        self.next_frame_with(|| ())
+    }
+
+    /// [`NdiDriver::next_frame`], calling `before_poll` right before every BX poll it sends:
+    /// the new frame comes with one of them, so a consumer can prepare for it there (the
+    /// tracker service warms the path its frame is published on).
+    pub fn next_frame_with(
+        &mut self,
+        mut before_poll: impl FnMut(),
+    ) -> Result<Stamped, DriverError> {
         // Polling sooner would only find the frame returned last again, and would keep the
         // CPU and the port busy while the consumers of that frame wait to run.
         let first_poll = self.last_frame_at + self.pacer.pause();
@@ -383,6 +393,7 @@ impl NdiDriver {
         let mut unanswered = 0;
         let mut answered = 0;
         loop {
+            before_poll();
             let started = Instant::now();
             let stamped = match self.poll() {
                 Ok(stamped) => stamped,

@@ -179,6 +179,18 @@ fn driver_tracks_the_simulated_device_on_a_pty() {
     .unwrap();
     let frame = again.next_frame().unwrap().reply.frame().unwrap();
     assert!(again.next_frame().unwrap().reply.frame().unwrap() > frame);
+    // A caller can prepare for the frame before every BX poll, one call per poll sent.
+    let polls_before = again.stats().polls;
+    let mut before_polls = 0;
+    let mut previous = frame;
+    for _ in 0..5 {
+        let stamped = again.next_frame_with(|| before_polls += 1).unwrap();
+        let next = stamped.reply.frame().unwrap();
+        assert!(next > previous);
+        previous = next;
+    }
+    assert!(before_polls >= 5);
+    assert_eq!(before_polls, again.stats().polls - polls_before);
     drop(again); // TSTOP on drop
 
     let (server, serve_stats) = rig.shut_down();

@@ -65,6 +65,22 @@ impl<T: Message, S: Transport> Publisher<T, S> {
         woken
     }
 
+    /// Brings what the next [`Publisher::send`] touches back into this CPU's caches and TLB
+    /// without sending: gives the sample loaned in advance back, loans one again (which
+    /// reclaims the samples the subscribers released through every connection, as a send
+    /// does) and zeroes its payload. For a stream slower than the loop that sends it: call it
+    /// on the wake-ups before a send. With both of its senders warmed (frames before every
+    /// BX poll, matched samples on every encoder sample), tracker frame → matched sample took
+    /// p99 41–53 µs instead of 58–73 µs in seven alternated runs on the development VM.
+    pub fn warm(&self) {
+        drop(self.loaned.take());
+        let mut sample = self.port.loan_uninit().ok();
+        if let Some(sample) = sample.as_mut() {
+            *sample.payload_mut() = MaybeUninit::zeroed();
+        }
+        self.loaned.replace(sample);
+    }
+
     /// The service name.
     pub fn service(&self) -> &str {
         &self.service

@@ -82,6 +82,36 @@ fn a_publisher_loaning_ahead_never_runs_out_of_samples() {
     release(&domain);
 }
 
+/// Warming a publisher touches what its next send uses and nothing else: it sends nothing,
+/// leaves what was sent alone, and keeps one loan however often it is warmed (a lost loan
+/// would exhaust the loans iceoryx2 grants, and the next send would fail).
+#[test]
+fn a_warmed_publisher_sends_nothing_and_keeps_one_loan() {
+    let domain = unique_domain("warm");
+    let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
+    let publisher = rt
+        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    let subscriber = rt
+        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
+        .unwrap();
+    for _ in 0..1_000 {
+        publisher.warm();
+    }
+    assert_eq!(subscriber.try_recv().unwrap(), None);
+    let sample = EncoderSample {
+        seq: 3,
+        t_ns: 42,
+        counts: [5, 4, 3, 2, 1],
+    };
+    publisher.send(sample).unwrap();
+    publisher.warm();
+    assert_eq!(subscriber.try_recv().unwrap(), Some(sample));
+    assert_eq!(subscriber.try_recv().unwrap(), None);
+    drop((publisher, subscriber, rt));
+    release(&domain);
+}
+
 /// Publishers that go away leave their unread samples to the subscriber: it keeps their
 /// connections (its expired-connection buffer) until it has read them, as many as can be
 /// connected at once.
