@@ -1,7 +1,9 @@
 //! In-process checks of the runtime's ports, lifecycle and cleanup, each in its own domain.
 
 use sabr_msgs::{services, EncoderSample, LifecycleState};
-use sabr_node::{domain_files, release_domain, Domain, Exit, GraphObserver, NodeRuntime};
+use sabr_node::{
+    domain_files, release_domain, Domain, Exit, GraphObserver, NodeRuntime, Publisher, Subscriber,
+};
 use std::time::{Duration, Instant};
 
 fn unique_domain(test: &str) -> Domain {
@@ -14,16 +16,18 @@ fn release(domain: &Domain) {
     assert!(left.is_empty(), "left behind: {left:?}");
 }
 
+/// A publisher and a subscriber of the encoder samples, both ports of `rt`.
+fn encoder_ports(rt: &NodeRuntime) -> (Publisher<EncoderSample>, Subscriber<EncoderSample>) {
+    let publisher = rt.publisher(services::ENCODER_SAMPLES).unwrap();
+    let subscriber = rt.subscriber(services::ENCODER_SAMPLES).unwrap();
+    (publisher, subscriber)
+}
+
 #[test]
 fn samples_flow_and_a_silent_publisher_times_out() {
     let domain = unique_domain("flow");
     let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
-    let publisher = rt
-        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
-        .unwrap();
-    let subscriber = rt
-        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
-        .unwrap();
+    let (publisher, subscriber) = encoder_ports(&rt);
     let sample = EncoderSample {
         seq: 7,
         t_ns: sabr_node::monotonic_ns(),
@@ -89,12 +93,7 @@ fn a_publisher_loaning_ahead_never_runs_out_of_samples() {
 fn a_warmed_publisher_sends_nothing_and_keeps_one_loan() {
     let domain = unique_domain("warm");
     let rt = NodeRuntime::with_domain("producer", domain.clone()).unwrap();
-    let publisher = rt
-        .publisher::<EncoderSample>(services::ENCODER_SAMPLES)
-        .unwrap();
-    let subscriber = rt
-        .subscriber::<EncoderSample>(services::ENCODER_SAMPLES)
-        .unwrap();
+    let (publisher, subscriber) = encoder_ports(&rt);
     for _ in 0..1_000 {
         publisher.warm();
     }
