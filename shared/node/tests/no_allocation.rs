@@ -61,8 +61,7 @@ fn count(
         send(seq);
         receive();
     }
-    let (mut sends, mut in_receives, mut received) = (Vec::new(), 0, 0);
-    sends.reserve(SENDS as usize);
+    let (mut sends, mut in_receives, mut received) = (Vec::with_capacity(SENDS as usize), 0, 0);
     for seq in 0..SENDS {
         let started = Instant::now();
         sends.push((allocations(|| send(seq)), started));
@@ -120,22 +119,28 @@ fn the_doorbell_allocates_beyond_iceoryx2_only_to_reread_its_consumers() {
         // A send that allocated more than iceoryx2's most is one that re-read the consumer
         // ports: at most one per refresh period (less a margin for the time between a send's
         // start and its ring's clock reading).
-        let rereads: Vec<Instant> = sends
-            .iter()
-            .filter(|(n, _)| *n > most_per_send)
-            .map(|(_, started)| *started)
-            .collect();
+        let rereads: Vec<&(u64, Instant)> =
+            sends.iter().filter(|(n, _)| *n > most_per_send).collect();
         for pair in rereads.windows(2) {
+            let apart = pair[1].1 - pair[0].1;
             assert!(
-                pair[1] - pair[0] >= CONSUMERS_REFRESH - Duration::from_millis(1),
-                "doorbell sends allocated beyond iceoryx2's send_copy {:?} apart",
-                pair[1] - pair[0]
+                apart >= CONSUMERS_REFRESH - Duration::from_millis(1),
+                "doorbell sends allocated beyond iceoryx2's send_copy {apart:?} apart"
             );
         }
         assert!(
             rereads.len() < sends.len() / 100,
             "{} of {SENDS} sends allocated more than iceoryx2's",
             rereads.len()
+        );
+        // Every other allocation is iceoryx2's own, send for send.
+        let total = |sends: &[(u64, Instant)]| sends.iter().map(|(n, _)| n).sum::<u64>();
+        let reread_extra: u64 = rereads.iter().map(|(n, _)| n - most_per_send).sum();
+        assert_eq!(
+            total(&sends) - reread_extra,
+            total(&plain_sends),
+            "allocations in {SENDS} doorbell sends, re-reads aside, against iceoryx2's own \
+             send_copy"
         );
         assert_eq!(receives, 0, "allocations in {SENDS} doorbell receives");
     }
