@@ -5,6 +5,8 @@
 //! - the synchroniser's exposure times against the rig's truth: with the configured latency,
 //!   and after a calibrated latency is announced on `sabr/calibrator/parameters` (taken from
 //!   the truth of the frames before), the exposure-time error p99 is ≤ 0.5 ms;
+//! - a waiting subscriber of the frames, and one of the matched samples, is pre-woken before
+//!   the tracker's polls: woken without a message more often than with one;
 //! - the recorder's recording passes the recording reader (`Recording::read`, as for
 //!   `sabr sim record`) and holds every encoder sample and tracker frame of its time span;
 //! - Ctrl-C stops the graph cleanly: no node process and no shared memory left.
@@ -161,6 +163,47 @@ fn announce_latency(probe: &Probe, dir: &Path, latency_ms: f64) {
         .expect("announce");
 }
 
+/// How a waiting subscriber of a stream was woken over a window: with messages to read, and
+/// without (a pre-wake).
+#[derive(Debug, Default)]
+struct Wakes {
+    with_messages: usize,
+    without: usize,
+}
+
+/// Waits on subscribers of the tracker frames and the matched samples for `window` and counts
+/// how each was woken.
+fn wakes_of_frames_and_matched(graph: &LaunchedGraph, window: Duration) -> (Wakes, Wakes) {
+    let mut rt = NodeRuntime::with_domain("waiter", graph.domain.clone()).expect("waiter node");
+    let frames: Subscriber<TrackerFrame> = rt.subscriber(services::TRACKER_FRAMES).expect("frames");
+    let matched: Subscriber<MatchedSample> =
+        rt.subscriber(services::SYNC_MATCHED).expect("matched");
+    let (mut frame_wakes, mut matched_wakes) = (Wakes::default(), Wakes::default());
+    let count = |wakes: &mut Wakes, read: usize| match read {
+        0 => wakes.without += 1,
+        _ => wakes.with_messages += 1,
+    };
+    let started = Instant::now();
+    rt.run_on_data(&[&frames, &matched], Duration::from_millis(100), |ctx| {
+        if ctx.woke_on_data() && ctx.woken_by(&frames) {
+            let mut read = 0;
+            frames.drain(|_| read += 1)?;
+            count(&mut frame_wakes, read);
+        }
+        if ctx.woke_on_data() && ctx.woken_by(&matched) {
+            let mut read = 0;
+            matched.drain(|_| read += 1)?;
+            count(&mut matched_wakes, read);
+        }
+        if started.elapsed() >= window {
+            ctx.stop();
+        }
+        Ok::<_, sabr_node::NodeError>(())
+    })
+    .expect("waiting on the frames and matched samples");
+    (frame_wakes, matched_wakes)
+}
+
 #[test]
 fn sim_sensing_graph_matches_to_truth_records_and_stops_cleanly() {
     let _alone = sabr_integration_tests::run_alone();
@@ -299,6 +342,23 @@ fn sim_sensing_graph_matches_to_truth_records_and_stops_cleanly() {
         p99 <= ERROR_P99_GOAL_NS,
         "exposure-time error p99 {p99} ns > {ERROR_P99_GOAL_NS} ns"
     );
+
+    // Before every BX poll the tracker pre-wakes the frames' subscribers, and the sync passes
+    // that on to the matched samples' (several polls per frame, so more pre-wakes than
+    // messages).
+    let (frame_wakes, matched_wakes) = wakes_of_frames_and_matched(&graph, Duration::from_secs(2));
+    println!(
+        "waiting subscribers woken: frames {frame_wakes:?}, matched samples {matched_wakes:?}"
+    );
+    for (stream, wakes) in [
+        ("frames", &frame_wakes),
+        ("matched samples", &matched_wakes),
+    ] {
+        assert!(
+            wakes.with_messages >= 30 && wakes.without >= wakes.with_messages,
+            "{stream}: {wakes:?} in 2 s"
+        );
+    }
 
     // Ctrl-C: the graph stops cleanly and leaves nothing behind.
     drop(probe);

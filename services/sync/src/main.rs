@@ -2,7 +2,8 @@
 //!
 //! Subscribes to `sabr/encoders/samples`, `sabr/tracker/frames` and
 //! `sabr/calibrator/parameters`; publishes `sabr/sync/matched`. See the library
-//! documentation for the method.
+//! documentation for the method. A ring of the frames without a frame is the tracker's
+//! pre-wake before a poll: the sync passes it on to its own subscribers.
 
 use anyhow::{bail, Context};
 use sabr_msgs::{
@@ -198,7 +199,9 @@ fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
         }
         if ctx.woken_by(&frames) {
             let now = monotonic_ns();
+            let mut read = 0;
             frames.drain(|frame| {
+                read += 1;
                 if frame.arrival_t_ns < started_ns {
                     history_frames += 1;
                     matcher.learn_clock(frame);
@@ -216,6 +219,11 @@ fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
                 let result = matcher.push_frame(frame, setting.current(), now);
                 watch.frame_admitted(frame.frame_number, result, matcher.last_clock());
             })?;
+            if read == 0 && ctx.woke_on_data() {
+                // Rung without a frame: the tracker's pre-wake before a BX poll. Passed on,
+                // so that the matched sample's subscribers wake from the cache too.
+                matched.prewake()?;
+            }
         }
         let mut send = Ok(());
         matcher.poll(monotonic_ns(), |result| match result {

@@ -1,6 +1,8 @@
 //! `sabr-tracker`: drives an NDI tracker (a real Polaris, or the rig's pseudo-terminal) with
 //! the `sabr_ndi` driver and publishes every new frame, stamped on arrival with the host's
-//! `CLOCK_MONOTONIC`, as a [`TrackerFrame`] on `sabr/tracker/frames`.
+//! `CLOCK_MONOTONIC`, as a [`TrackerFrame`] on `sabr/tracker/frames`. Before every BX poll it
+//! warms its send and pre-wakes the frames' subscribers, so that the frame's way to them runs
+//! from the cache (`sabr_node::Publisher::prewake`).
 //!
 //! A corrupt or refused reply is logged, counted and skipped; an unanswered poll is logged and
 //! sent again (twice, by the driver's default). A tracker that stops answering (time-outs in a
@@ -112,9 +114,16 @@ impl Tracking {
         handles: &HandleMap,
     ) -> anyhow::Result<()> {
         let retried_before = driver.stats().retried_polls;
-        // The frame comes with one of the polls, 50 ms after the last one: warmed before each
-        // poll, its send runs from the cache, not from memory the core's other work evicted.
-        let next = driver.next_frame_with(|| out.warm());
+        // The frame comes with one of the polls, 50 ms after the last one. Before each poll
+        // the send is warmed and the subscribers pre-woken: the send runs from the cache, not
+        // from memory the core's other work evicted, and so do the subscribers' wake-ups.
+        let mut prewoken = Ok(());
+        let next = driver.next_frame_with(|| {
+            out.warm();
+            if prewoken.is_ok() {
+                prewoken = out.prewake();
+            }
+        });
         let retried = driver.stats().retried_polls - retried_before;
         if retried > 0 {
             tracing::warn!(
@@ -140,6 +149,8 @@ impl Tracking {
                 return Err(error).context("the tracker is dead");
             }
         }
+        // (After the frame is out: a failed ring would fail its send too.)
+        prewoken.context("pre-waking the frames' subscribers")?;
         Ok(())
     }
 }

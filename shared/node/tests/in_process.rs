@@ -111,6 +111,57 @@ fn a_warmed_publisher_sends_nothing_and_keeps_one_loan() {
     release(&domain);
 }
 
+/// A pre-wake on transport `S` wakes a waiting subscriber as a send does, with nothing to
+/// read; the next send is read on the next wake-up.
+fn a_prewake_wakes_the_subscribers_without_a_message<S: sabr_node::Transport>(test: &str) {
+    let domain = unique_domain(test);
+    {
+        let mut rt = NodeRuntime::<S>::in_domain("consumer", domain.clone()).unwrap();
+        let publisher = rt.publisher::<EncoderSample>("sabr/test/slow").unwrap();
+        let subscriber = rt.subscriber::<EncoderSample>("sabr/test/slow").unwrap();
+        publisher.prewake().unwrap();
+        // (tick, woke on data, the subscriber rang, samples read)
+        let mut calls = Vec::new();
+        // Idle calls come 10 s apart: without the rings, the first call would be an idle one
+        // (woke on data false), 10 s late.
+        rt.run_on_data(&[&subscriber], Duration::from_secs(10), |ctx| {
+            let mut read = Vec::new();
+            if ctx.woken_by(&subscriber) {
+                subscriber.drain(|sample| read.push(sample.seq))?;
+            }
+            calls.push((
+                ctx.tick(),
+                ctx.woke_on_data(),
+                ctx.woken_by(&subscriber),
+                read,
+            ));
+            match ctx.tick() {
+                0 => publisher.send(EncoderSample {
+                    seq: 7,
+                    ..Default::default()
+                })?,
+                _ => ctx.stop(),
+            }
+            Ok::<_, sabr_node::NodeError>(())
+        })
+        .unwrap();
+        assert_eq!(calls, [(0, true, true, vec![]), (1, true, true, vec![7])]);
+    }
+    release(&domain);
+}
+
+#[test]
+fn a_prewake_wakes_the_subscribers_without_a_message_on_the_doorbell() {
+    a_prewake_wakes_the_subscribers_without_a_message::<sabr_node::Doorbell>("prewake-doorbell");
+}
+
+#[test]
+fn a_prewake_wakes_the_subscribers_without_a_message_on_iceoryx2_events() {
+    a_prewake_wakes_the_subscribers_without_a_message::<iceoryx2::prelude::ipc::Service>(
+        "prewake-events",
+    );
+}
+
 /// Publishers that go away leave their unread samples to the subscriber: it keeps their
 /// connections (its expired-connection buffer) until it has read them, as many as can be
 /// connected at once.
