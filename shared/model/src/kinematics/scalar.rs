@@ -18,6 +18,11 @@ pub(super) const IK_DIRECTION_TOLERANCE: f64 = 1e-8;
 const TILTED_IK_ITERATIONS: usize = 30;
 /// Joint step (rad) of the finite differences of the tilted inverse kinematics.
 const TILTED_IK_STEP: f64 = 1e-7;
+/// Largest residual (tip mm; needle-direction components) at which the Newton refinement of
+/// the tilted inverse kinematics stops: far below the acceptance tolerances, so that two
+/// implementations whose rounding differs (the real-time one and this) stop at the same
+/// root, not one step apart as when each stopped once its candidate was accepted.
+const TILTED_IK_CONVERGED: f64 = 1e-10;
 
 /// Refusal of a needle roll whose back gimbal centre lies on the θ3 axis.
 pub(super) const ON_ROLL_AXIS: &str = "the back gimbal centre would lie on the θ3 axis";
@@ -201,10 +206,10 @@ pub(super) fn refine_tilted(
         })
     };
     for _ in 0..TILTED_IK_ITERATIONS {
-        if reproduces(&q) {
-            return Ok(q);
-        }
         let f = evaluate(&q)?;
+        if f.amax() <= TILTED_IK_CONVERGED {
+            break;
+        }
         let mut jacobian = nalgebra::Matrix5::zeros();
         for j in 0..5 {
             let mut moved = q;
