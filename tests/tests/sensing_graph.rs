@@ -171,6 +171,16 @@ struct Wakes {
     without: usize,
 }
 
+impl Wakes {
+    /// One wake-up that found `read` messages.
+    fn count(&mut self, read: usize) {
+        match read {
+            0 => self.without += 1,
+            _ => self.with_messages += 1,
+        }
+    }
+}
+
 /// Waits on subscribers of the tracker frames and the matched samples for `window` and counts
 /// how each was woken.
 fn wakes_of_frames_and_matched(graph: &LaunchedGraph, window: Duration) -> (Wakes, Wakes) {
@@ -179,21 +189,13 @@ fn wakes_of_frames_and_matched(graph: &LaunchedGraph, window: Duration) -> (Wake
     let matched: Subscriber<MatchedSample> =
         rt.subscriber(services::SYNC_MATCHED).expect("matched");
     let (mut frame_wakes, mut matched_wakes) = (Wakes::default(), Wakes::default());
-    let count = |wakes: &mut Wakes, read: usize| match read {
-        0 => wakes.without += 1,
-        _ => wakes.with_messages += 1,
-    };
     let started = Instant::now();
     rt.run_on_data(&[&frames, &matched], Duration::from_millis(100), |ctx| {
         if ctx.woke_on_data() && ctx.woken_by(&frames) {
-            let mut read = 0;
-            frames.drain(|_| read += 1)?;
-            count(&mut frame_wakes, read);
+            frame_wakes.count(frames.drain(|_| {})?);
         }
         if ctx.woke_on_data() && ctx.woken_by(&matched) {
-            let mut read = 0;
-            matched.drain(|_| read += 1)?;
-            count(&mut matched_wakes, read);
+            matched_wakes.count(matched.drain(|_| {})?);
         }
         if started.elapsed() >= window {
             ctx.stop();

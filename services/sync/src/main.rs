@@ -199,9 +199,7 @@ fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
         }
         if ctx.woken_by(&frames) {
             let now = monotonic_ns();
-            let mut read = 0;
-            frames.drain(|frame| {
-                read += 1;
+            let read = frames.drain(|frame| {
                 if frame.arrival_t_ns < started_ns {
                     history_frames += 1;
                     matcher.learn_clock(frame);
