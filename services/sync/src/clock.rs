@@ -186,6 +186,20 @@ impl FrameClock {
         }
     }
 
+    /// The estimate [`FrameClock::observe_deferred`] would give a frame with the counter after
+    /// the newest frame's, arriving on the line; `None` before the first line. Changes nothing.
+    pub fn next_estimate(&self) -> Option<ClockEstimate> {
+        let newest = self.points.back()?;
+        let (line, last_fit) = (self.line.as_ref()?, self.last_fit?);
+        Some(ClockEstimate {
+            line_ns: line.at(newest.tick + 1).round() as i64,
+            residual_ns: 0,
+            period_ns: line.slope,
+            frames: (self.points.len() + 1).min(self.config.window),
+            ..last_fit
+        })
+    }
+
     /// How often the fit started over because the counter went back or jumped.
     pub fn restarts(&self) -> u64 {
         self.restarts

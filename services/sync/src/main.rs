@@ -3,7 +3,8 @@
 //! Subscribes to `sabr/encoders/samples`, `sabr/tracker/frames` and
 //! `sabr/calibrator/parameters`; publishes `sabr/sync/matched`. See the library
 //! documentation for the method. A ring of the frames without a frame is the tracker's
-//! pre-wake before a poll: the sync passes it on to its own subscribers.
+//! pre-wake before a poll: the sync passes it on to its own subscribers and matches the frame
+//! due in advance (`Matcher::warm`), so that the frame itself is matched from the cache.
 
 use anyhow::{bail, Context};
 use sabr_msgs::{
@@ -219,8 +220,10 @@ fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
             })?;
             if read == 0 && ctx.woke_on_data() {
                 // Rung without a frame: the tracker's pre-wake before a BX poll. Passed on,
-                // so that the matched sample's subscribers wake from the cache too.
+                // so that the matched sample's subscribers wake from the cache too, and the
+                // frame due is matched in advance, so that its matching runs from the cache.
                 matched.prewake()?;
+                std::hint::black_box(matcher.warm(setting.current()));
             }
         }
         let mut send = Ok(());

@@ -128,6 +128,8 @@ pub struct Matcher {
     seq: u64,
     stats: MatchStats,
     last_clock: Option<ClockEstimate>,
+    /// The newest frame admitted (the template [`Matcher::warm`] matches).
+    last_admitted: Option<Pending>,
     locked: bool,
 }
 
@@ -143,6 +145,7 @@ impl Matcher {
             seq: 0,
             stats: MatchStats::default(),
             last_clock: None,
+            last_admitted: None,
             locked: false,
         }
     }
@@ -242,14 +245,49 @@ impl Matcher {
             });
         }
         let latency = latency.ok_or(Unmatched::NoLatency)?;
-        self.pending.push_back(Pending {
+        let pending = Pending {
             frame,
             clock,
             latency,
             exposure_ns: clock.line_ns - latency.ns,
             received_ns: now_ns,
-        });
+        };
+        self.pending.push_back(pending);
+        self.last_admitted = Some(pending);
         Ok(())
+    }
+
+    /// Matches the frame due next without it and without changing anything: its counter
+    /// one after the newest admitted frame's, its clock line where the current line puts that
+    /// counter, the encoder counts at its exposure (with `latency`) and the sample built, as
+    /// [`Matcher::poll`] would. Returns that sample, or `None` while no frame was admitted,
+    /// there is no latency or the encoder samples after the exposure have not arrived.
+    ///
+    /// Between two frames (50 ms at 20 Hz) the core's other work evicts what matching a frame
+    /// reads; a caller that knows a frame is due (the sync, pre-woken by the tracker before a
+    /// poll) calls this so that the frame is admitted and matched from the cache.
+    pub fn warm(&self, latency: Option<Latency>) -> Option<MatchedSample> {
+        let last = self.last_admitted?;
+        let latency = latency?;
+        let frame_number = last.frame.frame_number.wrapping_add(1);
+        let clock = self.clock.next_estimate()?;
+        let pending = Pending {
+            frame: TrackerFrame {
+                frame_number,
+                ..last.frame
+            },
+            clock,
+            latency,
+            exposure_ns: clock.line_ns - latency.ns,
+            received_ns: last.received_ns,
+        };
+        match self
+            .encoders
+            .at(pending.exposure_ns, self.config.max_span_ns)
+        {
+            Lookup::Found(found) => Some(self.matched(&pending, found, self.seq + 1)),
+            _ => None,
+        }
     }
 
     /// Matches every waiting frame whose encoder data is complete, in order, at host time
@@ -271,7 +309,10 @@ impl Matcher {
                 .encoders
                 .at(pending.exposure_ns, self.config.max_span_ns)
             {
-                Lookup::Found(found) => Ok(self.matched(&pending, found)),
+                Lookup::Found(found) => {
+                    self.seq += 1;
+                    Ok(self.matched(&pending, found, self.seq))
+                }
                 Lookup::NotYet if now_ns - pending.received_ns <= self.config.match_timeout_ns => {
                     return;
                 }
@@ -291,15 +332,16 @@ impl Matcher {
         }
     }
 
+    /// The matched sample number `seq` of a frame and the encoder counts at its exposure.
     fn matched(
-        &mut self,
+        &self,
         pending: &Pending,
         found: crate::encoder_buffer::Interpolated,
+        seq: u64,
     ) -> MatchedSample {
-        self.seq += 1;
         let cpr = self.counts_per_rev;
         MatchedSample {
-            seq: self.seq,
+            seq,
             exposure_t_ns: pending.exposure_ns,
             arrival_t_ns: pending.frame.arrival_t_ns,
             available_t_ns: pending.frame.available_t_ns,
@@ -427,6 +469,63 @@ mod tests {
         }
         let seqs: Vec<u64> = matched.iter().map(|(m, _)| m.seq).collect();
         assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1));
+    }
+
+    #[test]
+    fn warming_predicts_the_next_frames_match_and_changes_nothing() {
+        // Two matchers fed the same exact stream; one is warmed before every frame, as the
+        // sync is when the tracker pre-wakes it. Its outputs must be the other's, and each
+        // warm-up must have matched the frame that came next as it came.
+        let mut stream = TrackerStream::new(4, 50_000_000.0, 1, LATENCY.ns);
+        stream.jitter_ns = 0.0;
+        stream.late_probability = 0.0;
+        stream.drop_probability = 0.0;
+        let frames: Vec<_> = std::iter::from_fn(|| stream.next_frame())
+            .take_while(|f| f.arrival_ns < 7_000_000_000)
+            .collect();
+        let cpr = [2000, 2000, 4000, 2000, 2000];
+        let mut warmed = Matcher::new(quickly_locking_config(), cpr);
+        let mut plain = Matcher::new(quickly_locking_config(), cpr);
+        let (mut warmed_out, mut plain_out) = (Vec::new(), Vec::new());
+        let (mut predicted, mut predictions_checked) = (None, 0);
+        let mut next_frame = 0;
+        for sample in encoder_samples(4_900_000_000, 1_000_000, 2_200, 20_000) {
+            while next_frame < frames.len() && frames[next_frame].arrival_ns <= sample.t_ns {
+                let f = frames[next_frame];
+                predicted = warmed.warm(Some(LATENCY));
+                for matcher in [&mut warmed, &mut plain] {
+                    let _ = matcher.push_frame(
+                        frame(f.counter, f.arrival_ns),
+                        Some(LATENCY),
+                        f.arrival_ns,
+                    );
+                }
+                next_frame += 1;
+            }
+            for (matcher, out) in [(&mut warmed, &mut warmed_out), (&mut plain, &mut plain_out)] {
+                matcher.push_encoder(sample);
+                matcher.poll(sample.t_ns, |r| out.push(r.expect("matched")));
+            }
+            if let (Some(mut guess), Some(actual)) = (predicted, warmed_out.last()) {
+                if actual.frame_number != guess.frame_number {
+                    continue;
+                }
+                // The frame's own stamps and its distance from the line are what it brings.
+                guess.arrival_t_ns = actual.arrival_t_ns;
+                guess.available_t_ns = actual.available_t_ns;
+                assert!(actual.quality.clock_residual_ns.abs() <= 1, "{actual:?}");
+                guess.quality.clock_residual_ns = actual.quality.clock_residual_ns;
+                assert_eq!(&guess, actual);
+                predictions_checked += 1;
+                predicted = None;
+            }
+        }
+        assert!(
+            predictions_checked > 30,
+            "{predictions_checked} predictions checked"
+        );
+        assert_eq!(warmed_out, plain_out);
+        assert_eq!(warmed.stats(), plain.stats());
     }
 
     #[test]
