@@ -128,6 +128,25 @@ impl Line {
     fn at(&self, tick: i64) -> f64 {
         (self.origin_ns as f64) + self.intercept + self.slope * (tick - self.origin_tick) as f64
     }
+
+    /// The estimate of this line at `tick` for a frame that arrived at `arrival_ns` (host ns), with
+    /// `frames` in the window and the spread and uncertainty of `fit` (the line's own fit).
+    fn estimate(
+        &self,
+        tick: i64,
+        arrival_ns: f64,
+        frames: usize,
+        fit: ClockEstimate,
+    ) -> ClockEstimate {
+        let line_ns = self.at(tick);
+        ClockEstimate {
+            line_ns: line_ns.round() as i64,
+            residual_ns: (arrival_ns - line_ns).round() as i64,
+            period_ns: self.slope,
+            frames,
+            ..fit
+        }
+    }
 }
 
 /// The online clock estimator; feed it every tracker frame in arrival order.
@@ -191,13 +210,9 @@ impl FrameClock {
     pub fn next_estimate(&self) -> Option<ClockEstimate> {
         let newest = self.points.back()?;
         let (line, last_fit) = (self.line.as_ref()?, self.last_fit?);
-        Some(ClockEstimate {
-            line_ns: line.at(newest.tick + 1).round() as i64,
-            residual_ns: 0,
-            period_ns: line.slope,
-            frames: (self.points.len() + 1).min(self.config.window),
-            ..last_fit
-        })
+        let tick = newest.tick + 1;
+        let frames = (self.points.len() + 1).min(self.config.window);
+        Some(line.estimate(tick, line.at(tick), frames, last_fit))
     }
 
     /// How often the fit started over because the counter went back or jumped.
@@ -269,14 +284,8 @@ impl FrameClock {
     fn extend(&mut self, line: Line, last_fit: ClockEstimate) -> ClockEstimate {
         self.stale = true;
         let newest = *self.points.back().expect("the window is not empty");
-        let line_ns = line.at(newest.tick);
-        ClockEstimate {
-            line_ns: line_ns.round() as i64,
-            residual_ns: (newest.arrival_ns as f64 - line_ns).round() as i64,
-            period_ns: line.slope,
-            frames: self.points.len(),
-            ..last_fit
-        }
+        let arrival_ns = newest.arrival_ns as f64;
+        line.estimate(newest.tick, arrival_ns, self.points.len(), last_fit)
     }
 
     /// Where the current line (or, while learning, the median interval) puts `tick`.

@@ -117,6 +117,20 @@ struct Pending {
     received_ns: i64,
 }
 
+impl Pending {
+    /// `frame`, received at host time `received_ns`, dated by `clock` and `latency`: exposed
+    /// at the clock line minus the latency.
+    fn new(frame: TrackerFrame, clock: ClockEstimate, latency: Latency, received_ns: i64) -> Self {
+        Self {
+            frame,
+            clock,
+            latency,
+            exposure_ns: clock.line_ns - latency.ns,
+            received_ns,
+        }
+    }
+}
+
 /// The matcher: feed it encoder samples and tracker frames, poll it for matched samples.
 #[derive(Debug, Clone)]
 pub struct Matcher {
@@ -245,13 +259,7 @@ impl Matcher {
             });
         }
         let latency = latency.ok_or(Unmatched::NoLatency)?;
-        let pending = Pending {
-            frame,
-            clock,
-            latency,
-            exposure_ns: clock.line_ns - latency.ns,
-            received_ns: now_ns,
-        };
+        let pending = Pending::new(frame, clock, latency, now_ns);
         self.pending.push_back(pending);
         self.last_admitted = Some(pending);
         Ok(())
@@ -270,17 +278,16 @@ impl Matcher {
         let last = self.last_admitted?;
         let latency = latency?;
         let frame_number = last.frame.frame_number.wrapping_add(1);
-        let clock = self.clock.next_estimate()?;
-        let pending = Pending {
-            frame: TrackerFrame {
-                frame_number,
-                ..last.frame
-            },
-            clock,
-            latency,
-            exposure_ns: clock.line_ns - latency.ns,
-            received_ns: last.received_ns,
+        let frame = TrackerFrame {
+            frame_number,
+            ..last.frame
         };
+        let pending = Pending::new(
+            frame,
+            self.clock.next_estimate()?,
+            latency,
+            last.received_ns,
+        );
         match self
             .encoders
             .at(pending.exposure_ns, self.config.max_span_ns)
