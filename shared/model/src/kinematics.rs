@@ -218,7 +218,7 @@ pub fn inverse(
     for &v in roll::gimbal_plane_directions(&p_r.into(), &z.into(), d).iter() {
         let v = Vector3::from(v);
         let p_b = p_r + d * v;
-        let radius = p_b.y.hypot(p_b.z);
+        let radius = (p_b.y * p_b.y + p_b.z * p_b.z).sqrt();
         if radius.is_nan() || radius <= 1e-9 {
             candidates.refuse(ON_ROLL_AXIS);
             continue;

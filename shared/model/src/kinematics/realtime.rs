@@ -266,7 +266,7 @@ impl RealtimeGeometry {
         for &v in roll::gimbal_plane_directions(&p_r.to_array(), &z.to_array(), d).iter() {
             let v = DVec3::from_array(v);
             let p_b = p_r + d * v;
-            let radius = p_b.y.hypot(p_b.z);
+            let radius = (p_b.y * p_b.y + p_b.z * p_b.z).sqrt();
             if radius.is_nan() || radius <= 1e-9 {
                 candidates.refuse(ON_ROLL_AXIS);
                 continue;

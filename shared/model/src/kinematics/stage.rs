@@ -55,7 +55,7 @@ impl FiveBar {
     /// Both joint solutions (θp, θd) (rad, not wrapped) reaching the effector point `(x, y)` (mm);
     /// an error says why the point is out of reach.
     pub(super) fn inverse(&self, x: f64, y: f64) -> Result<[(f64, f64); 2], String> {
-        let reach = x.hypot(y);
+        let reach = (x * x + y * y).sqrt();
         let (inner, outer) = ((self.l - self.distal).abs(), self.l + self.distal);
         if !(reach >= inner && reach <= outer) {
             return Err(format!(
