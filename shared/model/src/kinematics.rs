@@ -15,7 +15,7 @@ mod stage;
 
 use scalar::{
     check_finite_joints, check_gimbal_distance, check_gimbal_normal, check_inverse_inputs,
-    front_plane_crossing, front_stage_unreachable, refine_tilted, Candidates,
+    front_plane_crossing, front_stage_unreachable, planar_length, refine_tilted, Candidates,
     IK_DIRECTION_TOLERANCE, IK_TIP_TOLERANCE_MM, ON_ROLL_AXIS, WRONG_SIDE,
 };
 use stage::FiveBar;
@@ -218,7 +218,7 @@ pub fn inverse(
     for &v in roll::gimbal_plane_directions(&p_r.into(), &z.into(), d).iter() {
         let v = Vector3::from(v);
         let p_b = p_r + d * v;
-        let radius = (p_b.y * p_b.y + p_b.z * p_b.z).sqrt();
+        let radius = planar_length(p_b.y, p_b.z);
         if radius.is_nan() || radius <= 1e-9 {
             candidates.refuse(ON_ROLL_AXIS);
             continue;

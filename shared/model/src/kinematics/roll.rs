@@ -84,7 +84,7 @@ impl PlaneCondition {
         let half_width = ratio * FRAC_PI_2;
         let (cos_psi, sin_psi) = (self.a / amplitude, self.b / amplitude);
         let zeros = [((-sin_psi, cos_psi), false), ((sin_psi, -cos_psi), true)];
-        let [first, second] = zeros.map(|(zero, rising)| {
+        let [near_falling_zero, near_rising_zero] = zeros.map(|(zero, rising)| {
             let bracket = Bracket {
                 reference: zero,
                 low: -half_width,
@@ -93,14 +93,14 @@ impl PlaneCondition {
             };
             self.root_in(bracket, 0.0, zero)
         });
-        let mut roots = Roots::default();
-        if roll_order(first) <= roll_order(second) {
-            roots.push(first);
-            roots.push(second);
+        let (first, second) = if roll_order(near_falling_zero) <= roll_order(near_rising_zero) {
+            (near_falling_zero, near_rising_zero)
         } else {
-            roots.push(second);
-            roots.push(first);
-        }
+            (near_rising_zero, near_falling_zero)
+        };
+        let mut roots = Roots::default();
+        roots.push(first);
+        roots.push(second);
         Some(roots)
     }
 

@@ -3,6 +3,7 @@
 
 use std::f64::consts::FRAC_1_SQRT_2;
 
+use super::scalar::planar_length;
 use crate::Geometry;
 
 /// One stage: proximal link `l` on joint θp, distal link `l` plus the effector extension `l_e`
@@ -55,7 +56,7 @@ impl FiveBar {
     /// Both joint solutions (θp, θd) (rad, not wrapped) reaching the effector point `(x, y)` (mm);
     /// an error says why the point is out of reach.
     pub(super) fn inverse(&self, x: f64, y: f64) -> Result<[(f64, f64); 2], String> {
-        let reach = (x * x + y * y).sqrt();
+        let reach = planar_length(x, y);
         let (inner, outer) = ((self.l - self.distal).abs(), self.l + self.distal);
         if !(reach >= inner && reach <= outer) {
             return Err(format!(
