@@ -18,6 +18,8 @@
 use std::f64::consts::{FRAC_PI_2, TAU};
 use std::sync::LazyLock;
 
+use super::scalar::planar_length;
+
 /// Largest number of roots of a degree-2 trigonometric polynomial.
 pub(super) const MAX_ROOTS: usize = 4;
 /// Number of φ samples used to bracket the roots.
@@ -26,7 +28,7 @@ const SAMPLES: usize = 32;
 const MAX_ITERATIONS: usize = 60;
 
 /// `A c + B s + C c² + D c s + E s²`.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 struct PlaneCondition {
     a: f64,
     b: f64,
@@ -50,7 +52,7 @@ impl PlaneCondition {
 
     /// `R`, the amplitude of the linear part `A c + B s`.
     fn linear_amplitude(&self) -> f64 {
-        (self.a * self.a + self.b * self.b).sqrt()
+        planar_length(self.a, self.b)
     }
 
     /// `Q`, a bound on |C c² + D c s + E s²| over φ: the quadratic part is
@@ -58,7 +60,7 @@ impl PlaneCondition {
     /// its derivative with respect to φ is at most `2Q`.
     fn quadratic_bound(&self) -> f64 {
         let (half_difference, half_d) = (0.5 * (self.c - self.e), 0.5 * self.d);
-        0.5 * (self.c + self.e).abs() + (half_difference * half_difference + half_d * half_d).sqrt()
+        0.5 * (self.c + self.e).abs() + planar_length(half_difference, half_d)
     }
 
     /// All roots as cosines and sines, in the order of their rolls φ in [0, 2π).
