@@ -70,6 +70,9 @@ pub const IK_TRANSPORT: &str = "hop/ik-transport";
 /// find it hot. Judged against the same baselines, not a goal of its own: it shows the cold
 /// part of the round trip.
 pub const IK_ROUND_TRIP_FIRST: &str = "hop/ik-round-trip-first";
+/// The time the IK server reports having spent solving a request of [`IK_ROUND_TRIP`] (ns,
+/// `IkResponse::solve_ns`): the solver as it runs in the live graph, between the other nodes.
+pub const IK_SERVER_SOLVE: &str = "hop/ik-server-solve";
 /// Motor setpoint published → the rig's tick that applies it.
 pub const SETPOINT_TO_RIG: &str = "hop/setpoint-to-rig";
 /// |sync's exposure time − the rig's true exposure time| of a tracker frame.
@@ -361,6 +364,122 @@ pub fn floor_checks(measured: &[Measurement]) -> Vec<(Payload, Vec<GoalCheck>)> 
         .collect()
 }
 
+/// An event-driven hop with a p50 goal, the one-way doorbell hops its message crosses, and
+/// the work it does beyond them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HopPath {
+    /// Measurement name of the hop (one of [`HOPS`]).
+    pub hop: &'static str,
+    /// The payload whose baselines judge it.
+    pub payload: Payload,
+    /// One-way doorbell hops between the hop's start and its end: 1 for a message to a
+    /// subscriber, 2 for a request and its answer (the doorbell round trip of the payload
+    /// carries the same two messages).
+    pub legs: u32,
+    /// What the hop does beyond its legs.
+    pub work: &'static str,
+    /// The measurement of that work, if the bench takes one.
+    pub work_measured: Option<&'static str>,
+}
+
+/// The hops judged by [`FUTEX_P50_FACTOR`] and what their paths are made of.
+pub const HOP_PATHS: [HopPath; 3] = [
+    HopPath {
+        hop: ENCODER_TO_SUBSCRIBER,
+        payload: Payload::EncoderSample,
+        legs: 1,
+        work: "none: stamped right before the send",
+        work_measured: None,
+    },
+    HopPath {
+        hop: TRACKER_FRAME_TO_MATCHED,
+        payload: Payload::TrackerFrame,
+        legs: 2,
+        work: "the tracker's steps after the BX reply arrives, the sync's match",
+        work_measured: None,
+    },
+    HopPath {
+        hop: IK_ROUND_TRIP,
+        payload: Payload::Ik,
+        legs: 2,
+        work: "the server's solve",
+        work_measured: Some(IK_SERVER_SOLVE),
+    },
+];
+
+/// What the p50 goal of a hop leaves for its own work once its legs are paid at the hot
+/// doorbell's price.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorkBudget {
+    /// The hop's path.
+    pub path: HopPath,
+    /// Its legs at the doorbell's back-to-back price (ns): the `doorbell` round-trip p50 of
+    /// its payload × legs / 2.
+    pub legs_ns: u64,
+    /// The `futex` round-trip p50 of its payload (ns).
+    pub futex_p50_ns: u64,
+    /// [`FUTEX_P50_FACTOR`] × the futex p50 − the legs (ns); negative when the legs alone
+    /// exceed the goal.
+    pub left_ns: i64,
+    /// The p50 of [`HopPath::work_measured`] (ns), where measured.
+    pub work_p50_ns: Option<u64>,
+}
+
+/// For each of [`HOP_PATHS`] whose payload has both back-to-back baselines in `measured`:
+/// how much of its p50 goal is left for its work when its legs run as fast as the doorbell
+/// ping-pong, everything hot. Work that takes longer than that puts the goal out of reach
+/// whatever the transport's placement or warmth: the hop's legs are never faster than the
+/// same messages back to back.
+pub fn work_budgets(measured: &[Measurement]) -> Vec<WorkBudget> {
+    HOP_PATHS
+        .iter()
+        .filter_map(|path| {
+            let doorbell = baseline(measured, Transport::Doorbell, path.payload).ok()?;
+            let futex = baseline(measured, Transport::Futex, path.payload).ok()?;
+            let legs_ns = doorbell.p50 * u64::from(path.legs) / 2;
+            let goal_ns = (FUTEX_P50_FACTOR * futex.p50 as f64).round() as i64;
+            Some(WorkBudget {
+                path: *path,
+                legs_ns,
+                futex_p50_ns: futex.p50,
+                left_ns: goal_ns - legs_ns as i64,
+                work_p50_ns: path
+                    .work_measured
+                    .and_then(|name| summary_of(measured, name.to_owned()).ok())
+                    .map(|work| work.p50),
+            })
+        })
+        .collect()
+}
+
+/// The printed table of [`work_budgets`], a line per hop.
+pub fn budget_table(budgets: &[WorkBudget]) -> String {
+    let mut text = String::new();
+    for budget in budgets {
+        let path = &budget.path;
+        let left = if budget.left_ns >= 0 {
+            format_ns(budget.left_ns as u64)
+        } else {
+            format!("nothing (−{})", format_ns(budget.left_ns.unsigned_abs()))
+        };
+        let work = match budget.work_p50_ns {
+            Some(p50) => format!("{}, p50 {}", path.work, format_ns(p50)),
+            None => path.work.to_owned(),
+        };
+        let _ = writeln!(
+            text,
+            "  {:<33} {} leg{} {} ({:.2}× futex p50 {}): leaves {left} for its work ({work})",
+            path.hop,
+            path.legs,
+            if path.legs == 1 { "" } else { "s" },
+            format_ns(budget.legs_ns),
+            budget.legs_ns as f64 / budget.futex_p50_ns.max(1) as f64,
+            format_ns(budget.futex_p50_ns),
+        );
+    }
+    text
+}
+
 /// The printed table of [`floor_checks`]; empty without the paced and back-to-back baselines.
 pub fn floor_table(checks: &[(Payload, Vec<GoalCheck>)]) -> String {
     goal_table(checks, 33, |payload| paced_name(Transport::Futex, payload))
@@ -529,6 +648,52 @@ mod tests {
             table.contains("futex-paced/tracker-frame")
                 && table.contains("p50 9.007 µs ≤ 2× futex p50 3.001 µs: MISSED"),
             "{table}"
+        );
+    }
+
+    #[test]
+    fn the_work_budget_is_the_goal_less_the_legs_at_the_doorbells_price() {
+        let measured = [
+            constant("doorbell/encoder-sample", 4_000),
+            constant("futex/encoder-sample", 3_000),
+            constant("doorbell/tracker-frame", 5_000),
+            constant("futex/tracker-frame", 2_000),
+            constant("doorbell/ik", 4_000),
+            constant("futex/ik", 2_500),
+            constant(IK_SERVER_SOLVE, 700),
+        ];
+        let budgets = work_budgets(&measured);
+        assert_eq!(budgets.len(), 3);
+        // The histograms keep 3 significant digits: 4000 ns is stored as 4001, 3000 as 3001.
+        let encoder = &budgets[0];
+        assert_eq!(encoder.path.hop, ENCODER_TO_SUBSCRIBER);
+        assert_eq!(encoder.legs_ns, 2_000, "one leg: half the round trip");
+        assert_eq!(encoder.left_ns, 2 * 3_001 - 2_000);
+        assert_eq!(encoder.work_p50_ns, None);
+        let tracker = &budgets[1];
+        assert_eq!(tracker.legs_ns, 5_003);
+        assert_eq!(
+            tracker.left_ns,
+            2 * 2_000 - 5_003,
+            "the legs alone exceed the goal"
+        );
+        let ik = &budgets[2];
+        assert_eq!(ik.left_ns, 2 * 2_501 - 4_001);
+        assert_eq!(ik.work_p50_ns, Some(700));
+        let table = budget_table(&budgets);
+        let lines: Vec<&str> = table.lines().collect();
+        assert!(
+            lines[0].contains("1 leg 2.000 µs (0.67× futex p50 3.001 µs): leaves 4.002 µs"),
+            "{table}"
+        );
+        assert!(lines[1].contains("leaves nothing (−1.003 µs)"), "{table}");
+        assert!(
+            lines[2].ends_with("(the server's solve, p50 700 ns)"),
+            "{table}"
+        );
+        assert!(
+            work_budgets(&measured[..2]).len() == 1,
+            "only the encoder's baselines"
         );
     }
 

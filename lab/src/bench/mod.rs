@@ -275,6 +275,17 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<ExitCode> {
             );
             out!("{}", hops::floor_table(&floor_checks));
         }
+        let budgets = hops::work_budgets(&results.measurements);
+        if !budgets.is_empty() {
+            outln!(
+                "\nwhat each hop's p50 goal ({}× futex p50) leaves for the hop's own work once \
+                 its one-way legs are paid at the hot doorbell's price (the doorbell round trip \
+                 of its payload, back to back, halved per leg; a hop's legs are never faster \
+                 than that, so work that takes longer puts the goal out of reach):",
+                hops::FUTEX_P50_FACTOR
+            );
+            out!("{}", hops::budget_table(&budgets));
+        }
     }
     for line in &results.unavailable {
         outln!("{line}");

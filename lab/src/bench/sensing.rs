@@ -31,8 +31,8 @@ use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{self, GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE, SHIPPED_LAUNCH_FILE};
 use super::hops::{
-    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_ROUND_TRIP_FIRST, IK_TRANSPORT,
-    MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
+    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_ROUND_TRIP_FIRST, IK_SERVER_SOLVE,
+    IK_TRANSPORT, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
 };
 use super::payload::{Payload, IK_PERIOD};
 use super::stats::{self, format_ns, Measurement};
@@ -74,10 +74,6 @@ pub const MATCHING_ERROR_ABOUT_MEAN: &str = "hop/matching-error-about-mean";
 /// A `TrackerFrame`'s receipt by the bench minus its `arrival_t_ns` (ns): the tracker's part
 /// of [`TRACKER_FRAME_TO_MATCHED`] (reply parsing, publishing, the wake-up of a subscriber).
 pub const TRACKER_FRAME_TO_SUBSCRIBER: &str = "hop/tracker-frame-to-subscriber";
-
-/// The time the IK server reports having spent solving a request of [`IK_ROUND_TRIP`] (ns,
-/// `IkResponse::solve_ns`): the solver as it runs in the live graph, between the other nodes.
-pub const IK_SERVER_SOLVE: &str = "hop/ik-server-solve";
 
 /// The window of [`TRACKER_FRAME_TO_SUBSCRIBER`] is the main window divided by this.
 const FRAMES_WINDOW_DIVISOR: u32 = 3;
