@@ -57,6 +57,21 @@ pub struct HopSpec {
 pub const ENCODER_TO_SUBSCRIBER: &str = "hop/encoder-sample-to-subscriber";
 /// Tracker frame arrival (stamped by `tracker`) → its matched sample received from `sync`.
 pub const TRACKER_FRAME_TO_MATCHED: &str = "hop/tracker-frame-to-matched";
+/// [`TRACKER_FRAME_TO_MATCHED`] in parts, from the stamps a `MatchedSample` carries: the
+/// tracker's work on the frame (`frame_sent_t_ns − arrival_t_ns`: parsing, the availability
+/// estimate, converting).
+pub const CHAIN_TRACKER_WORK: &str = "chain/tracker-work";
+/// The frame's hop from the tracker's send to the sync's receipt (`frame_received_t_ns −
+/// frame_sent_t_ns`).
+pub const CHAIN_TRACKER_TO_SYNC: &str = "chain/tracker-to-sync";
+/// The sync's work from the frame's receipt to its matched sample's send (`sent_t_ns −
+/// frame_received_t_ns`: admitting, matching, building the sample).
+pub const CHAIN_SYNC_WORK: &str = "chain/sync-work";
+/// The matched sample's hop from the sync's send to the bench's receipt.
+pub const CHAIN_SYNC_TO_SUBSCRIBER: &str = "chain/sync-to-subscriber";
+/// [`CHAIN_TRACKER_WORK`] + [`CHAIN_SYNC_WORK`] of the same frame: the chain's work beyond
+/// its two legs.
+pub const CHAIN_WORK: &str = "chain/work";
 /// IK request → response at the client.
 pub const IK_ROUND_TRIP: &str = "hop/ik-round-trip";
 /// [`IK_ROUND_TRIP`] minus the server's solve time of the same request (as its response
@@ -395,8 +410,8 @@ pub const HOP_PATHS: [HopPath; 3] = [
         hop: TRACKER_FRAME_TO_MATCHED,
         payload: Payload::TrackerFrame,
         legs: 2,
-        work: "the tracker's steps after the BX reply arrives, the sync's match",
-        work_measured: None,
+        work: "the tracker's work after the BX reply arrives and the sync's match",
+        work_measured: Some(CHAIN_WORK),
     },
     HopPath {
         hop: IK_ROUND_TRIP,
@@ -463,7 +478,14 @@ pub fn budget_table(budgets: &[WorkBudget]) -> String {
             format!("nothing (−{})", format_ns(budget.left_ns.unsigned_abs()))
         };
         let work = match budget.work_p50_ns {
-            Some(p50) => format!("{}, p50 {}", path.work, format_ns(p50)),
+            Some(p50) => {
+                let fits = if i64::try_from(p50).is_ok_and(|p50| p50 <= budget.left_ns) {
+                    "within it"
+                } else {
+                    "more than that"
+                };
+                format!("{}, p50 {}: {fits}", path.work, format_ns(p50))
+            }
             None => path.work.to_owned(),
         };
         let _ = writeln!(
@@ -661,6 +683,7 @@ mod tests {
             constant("doorbell/ik", 4_000),
             constant("futex/ik", 2_500),
             constant(IK_SERVER_SOLVE, 700),
+            constant(CHAIN_WORK, 900),
         ];
         let budgets = work_budgets(&measured);
         assert_eq!(budgets.len(), 3);
@@ -686,9 +709,13 @@ mod tests {
             lines[0].contains("1 leg 2.000 µs (0.67× futex p50 3.001 µs): leaves 4.002 µs"),
             "{table}"
         );
-        assert!(lines[1].contains("leaves nothing (−1.003 µs)"), "{table}");
         assert!(
-            lines[2].ends_with("(the server's solve, p50 700 ns)"),
+            lines[1].contains("leaves nothing (−1.003 µs)")
+                && lines[1].ends_with("match, p50 900 ns: more than that)"),
+            "{table}"
+        );
+        assert!(
+            lines[2].ends_with("(the server's solve, p50 700 ns: within it)"),
             "{table}"
         );
         assert!(

@@ -11,7 +11,11 @@
 //!   a window of its own after that one, [`TRACKER_FRAME_TO_SUBSCRIBER`]: the `TrackerFrame`'s
 //!   own receipt by the bench minus the same stamp (tracker → bench), which splits the chain
 //!   into the tracker's part and the sync's (measured apart because the bench, listening
-//!   above the graph's priority, would otherwise run between the tracker and the sync).
+//!   above the graph's priority, would otherwise run between the tracker and the sync). The
+//!   stamps the matched sample carries split the chain in four, `chain/*`: the tracker's work
+//!   ([`CHAIN_TRACKER_WORK`]), the hop to the sync ([`CHAIN_TRACKER_TO_SYNC`]), the sync's
+//!   work ([`CHAIN_SYNC_WORK`]), the hop on ([`CHAIN_SYNC_TO_SUBSCRIBER`]); and [`CHAIN_WORK`],
+//!   the two works of a frame added.
 //! - [`MATCHING_ERROR`]: |`MatchedSample.exposure_t_ns` − `RigTruth.exposure_t_ns`| of the
 //!   same frame number, the sync given the simulated tracker's latency; and
 //!   [`MATCHING_ERROR_ABOUT_MEAN`], the same about its mean (the constant part a calibrated
@@ -31,7 +35,8 @@ use super::compute::{self, Target, SESSION_SEED};
 use super::cpu::measure_cpu_shares;
 use super::graph::{self, GraphMeasured, LiveGraph, SENSING_LAUNCH_FILE, SHIPPED_LAUNCH_FILE};
 use super::hops::{
-    Outcome, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_ROUND_TRIP_FIRST, IK_SERVER_SOLVE,
+    Outcome, CHAIN_SYNC_TO_SUBSCRIBER, CHAIN_SYNC_WORK, CHAIN_TRACKER_TO_SYNC, CHAIN_TRACKER_WORK,
+    CHAIN_WORK, ENCODER_TO_SUBSCRIBER, IK_ROUND_TRIP, IK_ROUND_TRIP_FIRST, IK_SERVER_SOLVE,
     IK_TRANSPORT, MATCHING_ERROR, MATCHING_ERROR_MEAN_LIMIT_NS, TRACKER_FRAME_TO_MATCHED,
 };
 use super::payload::{Payload, IK_PERIOD};
@@ -168,7 +173,7 @@ pub fn run(
 
     let mut notes = hops.notes(latency_ms);
     notes.push(ik_note);
-    let mut measurements = Vec::from(hops.into_measurements()?);
+    let mut measurements = hops.into_measurements()?;
     measurements.extend(ik.into_measurements());
     Ok(GraphMeasured {
         measurements,
@@ -492,6 +497,9 @@ struct SensingHops {
     encoder: Measurement,
     frame: Measurement,
     matched: Measurement,
+    /// [`CHAIN_TRACKER_WORK`], [`CHAIN_TRACKER_TO_SYNC`], [`CHAIN_SYNC_WORK`],
+    /// [`CHAIN_SYNC_TO_SUBSCRIBER`], [`CHAIN_WORK`].
+    chain: [Measurement; 5],
     matching_error: Measurement,
     /// True exposure time (ns) by frame number, of frames not matched yet.
     truths: BTreeMap<u32, i64>,
@@ -510,6 +518,14 @@ impl Default for SensingHops {
             encoder: Measurement::new(ENCODER_TO_SUBSCRIBER, "ns"),
             frame: Measurement::new(TRACKER_FRAME_TO_SUBSCRIBER, "ns"),
             matched: Measurement::new(TRACKER_FRAME_TO_MATCHED, "ns"),
+            chain: [
+                CHAIN_TRACKER_WORK,
+                CHAIN_TRACKER_TO_SYNC,
+                CHAIN_SYNC_WORK,
+                CHAIN_SYNC_TO_SUBSCRIBER,
+                CHAIN_WORK,
+            ]
+            .map(|name| Measurement::new(name, "ns")),
             matching_error: Measurement::new(MATCHING_ERROR, "ns"),
             truths: BTreeMap::new(),
             without_truth: 0,
@@ -549,9 +565,11 @@ impl SensingHops {
 
     /// A matched sample received at `received_ns`.
     fn matched_sample(&mut self, sample: &MatchedSample, received_ns: i64) -> anyhow::Result<()> {
-        let latency = elapsed_ns(sample.arrival_t_ns, received_ns)
-            .with_context(|| format!("matched sample of frame {}", sample.frame_number))?;
+        let context = || format!("matched sample of frame {}", sample.frame_number);
+        let latency = elapsed_ns(sample.arrival_t_ns, received_ns).with_context(context)?;
         self.matched.record(latency)?;
+        self.chain_parts(sample, received_ns)
+            .with_context(context)?;
         match self.truths.remove(&sample.frame_number) {
             Some(true_exposure_ns) => {
                 let error = sample.exposure_t_ns - true_exposure_ns;
@@ -563,6 +581,34 @@ impl SensingHops {
                 Ok(())
             }
         }
+    }
+
+    /// The parts of the chain from the stamps of a matched sample received at `received_ns`.
+    fn chain_parts(&mut self, sample: &MatchedSample, received_ns: i64) -> anyhow::Result<()> {
+        if sample.frame_sent_t_ns == 0 || sample.sent_t_ns == 0 {
+            bail!(
+                "it carries no send stamp (frame_sent_t_ns {}, sent_t_ns {}): tracker and \
+                 sync must be of this build",
+                sample.frame_sent_t_ns,
+                sample.sent_t_ns
+            );
+        }
+        let stamps = [
+            sample.arrival_t_ns,
+            sample.frame_sent_t_ns,
+            sample.frame_received_t_ns,
+            sample.sent_t_ns,
+            received_ns,
+        ];
+        let mut parts = [0; 4];
+        for (part, pair) in parts.iter_mut().zip(stamps.windows(2)) {
+            *part = elapsed_ns(pair[0], pair[1])?;
+        }
+        let [tracker_work, _, sync_work, _] = parts;
+        for (measurement, value) in self.chain.iter_mut().zip(parts) {
+            measurement.record(value)?;
+        }
+        self.chain[4].record(tracker_work + sync_work)
     }
 
     /// Mean signed matching error sync − truth (ns); `None` before any.
@@ -607,20 +653,17 @@ impl SensingHops {
 
     /// The hops, [`TRACKER_FRAME_TO_SUBSCRIBER`], and [`MATCHING_ERROR_ABOUT_MEAN`]: |error −
     /// mean error|, what is left once a calibrated latency absorbs the constant part.
-    fn into_measurements(self) -> anyhow::Result<[Measurement; 5]> {
+    fn into_measurements(self) -> anyhow::Result<Vec<Measurement>> {
         let mut about_mean = Measurement::new(MATCHING_ERROR_ABOUT_MEAN, "ns");
         if let Some(mean) = self.mean_error_ns() {
             for &error in &self.signed_errors {
                 about_mean.record((error as f64 - mean).abs().round() as u64)?;
             }
         }
-        Ok([
-            self.encoder,
-            self.frame,
-            self.matched,
-            self.matching_error,
-            about_mean,
-        ])
+        let mut measurements = vec![self.encoder, self.frame, self.matched];
+        measurements.extend(self.chain);
+        measurements.extend([self.matching_error, about_mean]);
+        Ok(measurements)
     }
 }
 
@@ -652,13 +695,57 @@ mod tests {
         }
     }
 
+    /// A matched sample whose frame arrived at `arrival_t_ns`, was sent by the tracker 100 ns
+    /// later, received by the sync 300 ns later and matched and sent 600 ns later.
     fn matched(frame_number: u32, exposure_t_ns: i64, arrival_t_ns: i64) -> MatchedSample {
         MatchedSample {
             frame_number,
             exposure_t_ns,
             arrival_t_ns,
+            frame_sent_t_ns: arrival_t_ns + 100,
+            frame_received_t_ns: arrival_t_ns + 300,
+            sent_t_ns: arrival_t_ns + 600,
             ..MatchedSample::default()
         }
+    }
+
+    #[test]
+    fn the_chain_splits_into_the_works_and_the_hops_of_its_stamps() {
+        let mut hops = SensingHops::default();
+        hops.matched_sample(&matched(3, 0, 10_000), 11_500).unwrap();
+        let values: Vec<(&str, u64)> = hops
+            .chain
+            .iter()
+            .map(|m| (m.name.as_str(), m.summary().max))
+            .collect();
+        assert_eq!(
+            values,
+            [
+                (CHAIN_TRACKER_WORK, 100),
+                (CHAIN_TRACKER_TO_SYNC, 200),
+                (CHAIN_SYNC_WORK, 300),
+                (CHAIN_SYNC_TO_SUBSCRIBER, 900),
+                (CHAIN_WORK, 400),
+            ]
+        );
+        let unstamped = MatchedSample {
+            sent_t_ns: 0,
+            ..matched(4, 0, 20_000)
+        };
+        let error = hops.matched_sample(&unstamped, 21_000).unwrap_err();
+        assert!(
+            format!("{error:#}").contains("matched sample of frame 4: it carries no send stamp"),
+            "{error:#}"
+        );
+        let reordered = MatchedSample {
+            frame_received_t_ns: 19_000,
+            ..matched(5, 0, 20_000)
+        };
+        let error = hops.matched_sample(&reordered, 21_000).unwrap_err();
+        assert!(
+            format!("{error:#}").contains("before its time stamp"),
+            "{error:#}"
+        );
     }
 
     #[test]
@@ -743,7 +830,8 @@ mod tests {
             "{notes:?}"
         );
         // Both errors are 200 µs from their mean of +100 µs.
-        let [.., about_mean] = hops.into_measurements().unwrap();
+        let about_mean = hops.into_measurements().unwrap().pop().unwrap();
+        assert_eq!(about_mean.name, MATCHING_ERROR_ABOUT_MEAN);
         let spread = about_mean.summary();
         assert_eq!(spread.count, 2);
         assert!(spread.p50.abs_diff(200_000) < 200 && spread.max.abs_diff(200_000) < 200);

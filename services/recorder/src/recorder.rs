@@ -242,6 +242,7 @@ mod tests {
             seq: u64::from(frame_number),
             arrival_t_ns: 50_000_000 * i64::from(frame_number) + 600_000,
             available_t_ns: 50_000_000 * i64::from(frame_number),
+            sent_t_ns: 50_000_000 * i64::from(frame_number) + 602_000,
             frame_number,
             tools,
         }

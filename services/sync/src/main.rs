@@ -228,8 +228,9 @@ fn run(args: &Args, rt: &mut NodeRuntime) -> anyhow::Result<Exit> {
         }
         let mut send = Ok(());
         matcher.poll(monotonic_ns(), |result| match result {
-            Ok(sample) => {
+            Ok(mut sample) => {
                 if send.is_ok() {
+                    sample.sent_t_ns = monotonic_ns();
                     send = matched.send(sample);
                 }
             }

@@ -352,6 +352,10 @@ impl Matcher {
             exposure_t_ns: pending.exposure_ns,
             arrival_t_ns: pending.frame.arrival_t_ns,
             available_t_ns: pending.frame.available_t_ns,
+            frame_sent_t_ns: pending.frame.sent_t_ns,
+            frame_received_t_ns: pending.received_ns,
+            // Stamped by the caller right before its send.
+            sent_t_ns: 0,
             frame_number: pending.frame.frame_number,
             counts: found.counts,
             encoder_angle_rad: std::array::from_fn(|j| TAU * found.counts[j] / f64::from(cpr[j])),
@@ -397,6 +401,9 @@ mod tests {
     /// the arrival stamp is this much later than the availability stamp.
     const REPLY_DELAY_NS: i64 = 700_000;
 
+    /// The tracker's work on a synthetic frame from its arrival to its send, ns.
+    const TRACKER_WORK_NS: i64 = 2_000;
+
     /// A frame that became available at the device at `available_ns` (the synthetic streams'
     /// `arrival_ns`, drawn from exposure + latency + jitter) and arrived [`REPLY_DELAY_NS`]
     /// later.
@@ -405,6 +412,7 @@ mod tests {
             seq: 0,
             arrival_t_ns: available_ns + REPLY_DELAY_NS,
             available_t_ns: available_ns,
+            sent_t_ns: available_ns + REPLY_DELAY_NS + TRACKER_WORK_NS,
             frame_number: counter,
             tools: Default::default(),
         }
@@ -462,6 +470,10 @@ mod tests {
         let p99 = errors[errors.len() * 99 / 100];
         assert!(p99 <= 500_000, "exposure error p99 {p99} ns");
         for (m, _) in &matched {
+            assert_eq!(m.frame_sent_t_ns, m.arrival_t_ns + TRACKER_WORK_NS);
+            // The session pushes each frame at its stream's arrival, the frame's availability.
+            assert_eq!(m.frame_received_t_ns, m.available_t_ns);
+            assert_eq!(m.sent_t_ns, 0, "stamped by the node right before its send");
             assert_eq!(m.quality.latency_ns, LATENCY.ns);
             assert!(m.quality.interpolation_span_ns <= 1_040_000);
             let spread = m.quality.clock_spread_ns;
@@ -520,6 +532,8 @@ mod tests {
                 // The frame's own stamps and its distance from the line are what it brings.
                 guess.arrival_t_ns = actual.arrival_t_ns;
                 guess.available_t_ns = actual.available_t_ns;
+                guess.frame_sent_t_ns = actual.frame_sent_t_ns;
+                guess.frame_received_t_ns = actual.frame_received_t_ns;
                 assert!(actual.quality.clock_residual_ns.abs() <= 1, "{actual:?}");
                 guess.quality.clock_residual_ns = actual.quality.clock_residual_ns;
                 assert_eq!(&guess, actual);

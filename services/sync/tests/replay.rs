@@ -48,6 +48,7 @@ fn tracker_frames(recording: &Recording) -> Vec<TrackerFrame> {
                 seq: frames.len() as u64 + 1,
                 arrival_t_ns: row.arrival_t_ns,
                 available_t_ns: row.t_ns,
+                sent_t_ns: 0, // not recorded
                 frame_number: row.frame,
                 tools: Default::default(),
             });

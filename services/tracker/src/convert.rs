@@ -65,6 +65,8 @@ pub fn tracker_frame(seq: u64, stamped: &Stamped, map: &HandleMap) -> TrackerFra
         seq,
         arrival_t_ns: stamped.arrival_ns,
         available_t_ns: stamped.available_ns,
+        // Stamped by the caller right before its send.
+        sent_t_ns: 0,
         frame_number: reply.frame().unwrap_or(0),
         tools: Tool::ALL.map(|tool| tool_sample(tool, reply.handle(map.handle(tool)))),
     }

@@ -19,7 +19,7 @@ use std::time::Duration;
 use anyhow::Context;
 use sabr_msgs::{services, Tool, TrackerFrame};
 use sabr_ndi::{Baud, DriverConfig, DriverError, NdiDriver};
-use sabr_node::{Exit, NodeRuntime, Publisher};
+use sabr_node::{monotonic_ns, Exit, NodeRuntime, Publisher};
 
 use convert::{tracker_frame, HandleMap};
 
@@ -135,7 +135,9 @@ impl Tracking {
         match next {
             Ok(stamped) => {
                 self.published += 1;
-                out.send(tracker_frame(self.published, &stamped, handles))?;
+                let mut frame = tracker_frame(self.published, &stamped, handles);
+                frame.sent_t_ns = monotonic_ns();
+                out.send(frame)?;
             }
             Err(error @ (DriverError::Reply { .. } | DriverError::Device { .. })) => {
                 self.bad_replies += 1;

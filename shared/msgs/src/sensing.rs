@@ -105,7 +105,7 @@ impl ToolSample {
 /// One tracker frame as received by `tracker` (20 Hz on a Polaris Vicra).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.TrackerFrame.v2")]
+#[type_name("sabr.TrackerFrame.v3")]
 pub struct TrackerFrame {
     /// Sequence number, +1 per published frame.
     pub seq: u64,
@@ -117,6 +117,11 @@ pub struct TrackerFrame {
     /// did (within ± half their gap). The exposure is earlier by the device latency; this is
     /// the stamp `sync` fits its frame clock through.
     pub available_t_ns: i64,
+    /// Host `CLOCK_MONOTONIC` time right before `tracker` published the frame, ns: from
+    /// [`Self::arrival_t_ns`] to here the tracker parsed the reply, estimated the
+    /// availability and converted the tools (0 where unknown: a frame not published by
+    /// `tracker`, or rebuilt from a recording).
+    pub sent_t_ns: i64,
     /// The tracker's own frame counter.
     pub frame_number: u32,
     /// Per-tool measurements, indexed by [`Tool`] (`tools[Tool::Front as usize]`).
@@ -167,7 +172,7 @@ pub struct MatchQuality {
 /// A tracker frame paired with the encoder state at its exposure time (published by `sync`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("sabr.MatchedSample.v3")]
+#[type_name("sabr.MatchedSample.v4")]
 pub struct MatchedSample {
     /// Sequence number, +1 per matched sample.
     pub seq: u64,
@@ -179,6 +184,16 @@ pub struct MatchedSample {
     /// Estimated time the frame became available at the device (as in
     /// [`TrackerFrame::available_t_ns`]), host `CLOCK_MONOTONIC` ns.
     pub available_t_ns: i64,
+    /// When `tracker` published the frame (as in [`TrackerFrame::sent_t_ns`]), host
+    /// `CLOCK_MONOTONIC` ns.
+    pub frame_sent_t_ns: i64,
+    /// When `sync` took the frame from its subscriber, host `CLOCK_MONOTONIC` ns.
+    pub frame_received_t_ns: i64,
+    /// Host `CLOCK_MONOTONIC` time right before `sync` published this sample, ns (0 in a
+    /// sample that was not published). With the two stamps before it and
+    /// [`Self::arrival_t_ns`], the frame's way from the tracker's port to a subscriber in
+    /// parts: the tracker's work, the hop to `sync`, the match, the hop on.
+    pub sent_t_ns: i64,
     /// The tracker's frame counter.
     pub frame_number: u32,
     /// Encoder counts of joints 1..5 interpolated to the exposure time.
@@ -243,9 +258,9 @@ mod tests {
                 ("sabr.EncoderSample.v1", 56),
                 ("sabr.CounterLatch.v1", 56),
                 ("sabr.ToolSample.v1", 72),
-                ("sabr.TrackerFrame.v2", 320),
+                ("sabr.TrackerFrame.v3", 328),
                 ("sabr.MatchQuality.v2", 56),
-                ("sabr.MatchedSample.v3", 464),
+                ("sabr.MatchedSample.v4", 488),
                 ("sabr.RigTruth.v1", 152),
             ]
         );

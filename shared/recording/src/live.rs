@@ -78,6 +78,7 @@ mod tests {
             seq: 7,
             arrival_t_ns: 123_456_789,
             available_t_ns: 122_856_789,
+            sent_t_ns: 123_458_789,
             frame_number: 42,
             tools: [seen; 4],
         };
