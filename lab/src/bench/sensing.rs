@@ -732,20 +732,23 @@ mod tests {
             sent_t_ns: 0,
             ..matched(4, 0, 20_000)
         };
-        let error = hops.matched_sample(&unstamped, 21_000).unwrap_err();
-        assert!(
-            format!("{error:#}").contains("matched sample of frame 4: it carries no send stamp"),
-            "{error:#}"
-        );
         let reordered = MatchedSample {
             frame_received_t_ns: 19_000,
             ..matched(5, 0, 20_000)
         };
-        let error = hops.matched_sample(&reordered, 21_000).unwrap_err();
-        assert!(
-            format!("{error:#}").contains("before its time stamp"),
-            "{error:#}"
-        );
+        for (sample, expected) in [
+            (
+                unstamped,
+                "matched sample of frame 4: it carries no send stamp",
+            ),
+            (
+                reordered,
+                "frame 5: received at 19000 ns, before its time stamp 20100 ns",
+            ),
+        ] {
+            let error = hops.matched_sample(&sample, 21_000).unwrap_err();
+            assert!(format!("{error:#}").contains(expected), "{error:#}");
+        }
     }
 
     #[test]
