@@ -85,6 +85,11 @@ fn quick_hops_measure_the_live_graphs() {
     assert_eq!(
         names,
         [
+            "chain/sync-to-subscriber",
+            "chain/sync-work",
+            "chain/tracker-to-sync",
+            "chain/tracker-work",
+            "chain/work",
             "hop/encoder-sample-to-subscriber",
             "hop/ik-round-trip",
             "hop/ik-round-trip-first",
@@ -127,6 +132,24 @@ fn quick_hops_measure_the_live_graphs() {
         count("hop/tracker-frame-to-subscriber") >= 0.8 * 20.0 * WINDOW_S / 3.0,
         "{stdout}"
     );
+    // Every matched sample splits into the chain's parts; each part of a sample is at most
+    // its whole, so no part's percentile can exceed the whole's.
+    for part in [
+        "chain/tracker-work",
+        "chain/tracker-to-sync",
+        "chain/sync-work",
+        "chain/sync-to-subscriber",
+        "chain/work",
+    ] {
+        assert_eq!(count(part), matched, "{part}: {stdout}");
+        for column in ["p50", "p99", "max"] {
+            assert!(
+                number(&rows[part], column)
+                    <= number(&rows["hop/tracker-frame-to-matched"], column),
+                "{part} {column}: {stdout}"
+            );
+        }
+    }
     // Every matched sample found the rig's truth of its frame.
     assert_eq!(count("hop/matching-error"), matched, "{stdout}");
     assert_eq!(count("hop/matching-error-about-mean"), matched, "{stdout}");
