@@ -363,10 +363,17 @@ impl<S: Transport> NodeRuntime<S> {
     }
 
     /// Sleeps up to `duration`, returning early with `false` on a stop request; sends the
-    /// heartbeat when due.
+    /// heartbeat when due. A sleep cut short by a signal that requests no stop (a SIGCONT
+    /// after a SIGSTOP, say) goes on until `duration` is over.
     pub fn sleep(&mut self, duration: Duration) -> bool {
-        if !self.stop_requested && self.node.wait(duration).is_err() {
-            self.stop_requested = true;
+        let until = Instant::now() + duration;
+        while !self.stop_requested
+            && self
+                .node
+                .wait(until.saturating_duration_since(Instant::now()))
+                .is_err()
+        {
+            self.stop_requested = termination_requested();
         }
         self.heartbeat_if_due();
         !self.stop_requested
@@ -476,10 +483,9 @@ impl<S: Transport> NodeRuntime<S> {
         loop {
             let until_idle = idle.saturating_sub(last_body.elapsed());
             let until_heartbeat = HEARTBEAT_PERIOD.saturating_sub(self.last_heartbeat.elapsed());
+            // A wait cut short by a signal returns like a timeout: whether the signal requests
+            // a stop (SIGINT, SIGTERM) or not (a SIGCONT after a SIGSTOP) is the flag's to say.
             let waited = wait(until_idle.min(until_heartbeat));
-            if waited.stop {
-                self.stop_requested = true;
-            }
             if !self.keep_running() {
                 return Ok(self.leave(Exit::Signal));
             }

@@ -18,7 +18,6 @@ use iceoryx2::prelude::{
     ipc, CallbackProgression, PortFactory, PortName, WaitSetAttachmentId, WaitSetBuilder,
 };
 use iceoryx2::service::port_factory::publish_subscribe;
-use iceoryx2::waitset::WaitSetRunResult;
 use sealed::Waited;
 use std::rc::Rc;
 use std::time::Duration;
@@ -53,8 +52,6 @@ pub(crate) mod sealed {
     pub struct Waited {
         /// An input of the loop rang (its data may be read).
         pub data: bool,
-        /// A termination signal arrived.
-        pub stop: bool,
     }
 
     /// The wake-up operations of a transport (not implementable outside this crate).
@@ -177,12 +174,10 @@ impl sealed::Sealed for ipc::Service {
                 },
                 timeout,
             );
-            match result {
-                Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => {
-                    waited.stop = true;
-                }
-                Ok(_) => {}
-                Err(error) => tracing::warn!(?error, "WaitSet wait failed"),
+            // A termination request or an interrupt returns like a timeout (the loop looks
+            // at the stop request itself).
+            if let Err(error) = result {
+                tracing::warn!(?error, "WaitSet wait failed");
             }
             waited
         };
@@ -247,10 +242,11 @@ impl sealed::Sealed for Doorbell {
             .iter()
             .fold(0, |mask, input| mask | input.wake_listener().mask());
         let mut wait = |timeout: Duration| {
-            let stop = bell.wait_for(wanted, timeout).is_err();
+            // An interrupted wait returns like a timeout (the loop looks at the stop request
+            // itself).
+            let _interrupted = bell.wait_for(wanted, timeout);
             Waited {
                 data: bell.any_pending(wanted),
-                stop,
             }
         };
         Ok(run(&mut wait))
