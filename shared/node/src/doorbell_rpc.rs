@@ -5,6 +5,7 @@
 use crate::doorbell::{Doorbell, Inbox, Ringer};
 use crate::events::service_name;
 use crate::message::Message;
+use crate::signals::termination_requested;
 use crate::transport::Waitable;
 use crate::{NodeError, NodeRuntime};
 use iceoryx2::pending_response::PendingResponse;
@@ -134,8 +135,9 @@ impl<Req: Message, Resp: Message> DoorbellClient<Req, Resp> {
                 // comes first because it also connects to a server that appeared since.)
                 return receive();
             }
-            if self.inbox.wait(left).is_err() {
-                // A signal: let the caller look at the stop request.
+            if self.inbox.wait(left).is_err() && termination_requested() {
+                // A stop request: let the caller look at it. (Another signal, a SIGCONT after
+                // a SIGSTOP say, only cut the wait short.)
                 return Ok(None);
             }
         }

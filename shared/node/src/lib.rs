@@ -48,6 +48,7 @@ mod orphans;
 mod ports;
 mod runtime;
 mod service;
+mod signals;
 mod time;
 mod transport;
 
@@ -60,10 +61,11 @@ pub use message::Message;
 pub use observer::GraphObserver;
 pub use ports::{Publisher, Subscriber};
 pub use runtime::{
-    parse_loop_phase, run_dir, termination_requested, validate_node_name, Exit, LoopCtx,
-    NodeRuntime, HEARTBEAT_PERIOD, LOOP_PHASE_ENV, MAX_LOOP_PHASE_US, NODE_NAME_ENV, RUN_DIR_ENV,
+    parse_loop_phase, run_dir, validate_node_name, Exit, LoopCtx, NodeRuntime, HEARTBEAT_PERIOD,
+    LOOP_PHASE_ENV, MAX_LOOP_PHASE_US, NODE_NAME_ENV, RUN_DIR_ENV,
 };
 pub use service::{in_run_dir, service_main, StallWatch, StatusTimer, STATUS_PERIOD};
+pub use signals::termination_requested;
 pub use time::{delay_to_phase, monotonic_ns};
 pub use transport::{Transport, Waitable};
 

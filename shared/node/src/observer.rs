@@ -1,6 +1,7 @@
 //! Watching the nodes of a domain from outside the graph (the launcher, tests).
 
 use crate::runtime::{lifecycle_service, LIFECYCLE_BUFFER};
+use crate::signals::wait_on_node;
 use crate::Doorbell;
 use crate::{Domain, NodeError, Transport};
 use iceoryx2::node::Node;
@@ -63,9 +64,10 @@ impl<S: Transport> GraphObserver<S> {
         }
     }
 
-    /// Sleeps up to `duration`; `false` if SIGINT or SIGTERM arrived (once per signal).
+    /// Sleeps up to `duration` (any signal may cut it short); `false` once SIGINT or SIGTERM
+    /// has arrived.
     pub fn wait(&self, duration: Duration) -> bool {
-        self.node.wait(duration).is_ok()
+        !wait_on_node(&self.node, duration)
     }
 
     /// Removes the iceoryx2 resources of nodes whose process died (e.g. by SIGKILL), waiting

@@ -3,12 +3,12 @@
 use crate::events::service_name;
 use crate::message::Message;
 use crate::ports::{Publisher, Subscriber};
+use crate::signals::{termination_requested, wait_on_node};
 use crate::transport::{Transport, Waitable};
 use crate::Doorbell;
 use crate::{monotonic_ns, Domain, NodeError};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::{NodeBuilder, NodeName};
-use iceoryx2_bb_posix::signal::SignalHandler;
 use sabr_msgs::{services, Lifecycle, LifecycleState, NodeLabel};
 use std::path::PathBuf;
 use std::rc::Rc;
@@ -53,12 +53,6 @@ pub fn parse_loop_phase(value: &str) -> Result<Duration, NodeError> {
         return Err(invalid("must be below one second (999999 µs at most)"));
     }
     Ok(Duration::from_micros(u64::from(us)))
-}
-
-/// True once SIGINT or SIGTERM arrived (what [`NodeRuntime::keep_running`] looks at), for
-/// code that has no runtime at hand, e.g. to tell a device lost in a stop from a failure.
-pub fn termination_requested() -> bool {
-    SignalHandler::termination_requested()
 }
 
 /// Why a main loop returned.
@@ -237,7 +231,7 @@ impl<S: Transport> NodeRuntime<S> {
         }
         // Installs iceoryx2's SIGINT/SIGTERM handler now rather than at the first wait, so a stop
         // request during set-up is seen instead of killing the process.
-        let stop_requested = node.wait(Duration::ZERO).is_err();
+        let stop_requested = wait_on_node(&node, Duration::ZERO);
         let lifecycle = lifecycle_service(&node)?
             .publisher_builder()
             .create()
@@ -367,13 +361,12 @@ impl<S: Transport> NodeRuntime<S> {
     /// after a SIGSTOP, say) goes on until `duration` is over.
     pub fn sleep(&mut self, duration: Duration) -> bool {
         let until = Instant::now() + duration;
-        while !self.stop_requested
-            && self
-                .node
-                .wait(until.saturating_duration_since(Instant::now()))
-                .is_err()
-        {
-            self.stop_requested = termination_requested();
+        loop {
+            let left = until.saturating_duration_since(Instant::now());
+            self.stop_requested = self.stop_requested || wait_on_node(&self.node, left);
+            if self.stop_requested || Instant::now() >= until {
+                break;
+            }
         }
         self.heartbeat_if_due();
         !self.stop_requested

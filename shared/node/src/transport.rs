@@ -10,6 +10,7 @@
 use crate::doorbell::{Bell, Doorbell, Inbox, Ringer};
 use crate::events::{listener_on, notifier_on};
 use crate::message::Message;
+use crate::signals::note_termination_request;
 use crate::NodeError;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::Listener;
@@ -18,6 +19,7 @@ use iceoryx2::prelude::{
     ipc, CallbackProgression, PortFactory, PortName, WaitSetAttachmentId, WaitSetBuilder,
 };
 use iceoryx2::service::port_factory::publish_subscribe;
+use iceoryx2::waitset::WaitSetRunResult;
 use sealed::Waited;
 use std::rc::Rc;
 use std::time::Duration;
@@ -175,9 +177,11 @@ impl sealed::Sealed for ipc::Service {
                 timeout,
             );
             // A termination request or an interrupt returns like a timeout (the loop looks
-            // at the stop request itself).
-            if let Err(error) = result {
-                tracing::warn!(?error, "WaitSet wait failed");
+            // at the stop request itself); a termination request the waitset read is kept.
+            match result {
+                Ok(WaitSetRunResult::TerminationRequest) => note_termination_request(),
+                Ok(_) => {}
+                Err(error) => tracing::warn!(?error, "WaitSet wait failed"),
             }
             waited
         };
