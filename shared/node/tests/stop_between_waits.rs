@@ -11,7 +11,8 @@
 use nix::sys::signal::{raise, Signal};
 use sabr_msgs::{services, EncoderSample};
 use sabr_node::iceoryx2::prelude::ipc;
-use sabr_node::{release_domain, termination_requested, Domain, Exit, NodeRuntime};
+use sabr_node::{release_domain, termination_requested, Domain, Exit, LoopCtx, NodeRuntime};
+use std::convert::Infallible;
 use std::process::Command;
 use std::time::Duration;
 
@@ -49,6 +50,30 @@ fn release(domain: &Domain) {
     assert!(left.is_empty(), "left behind: {left:?}");
 }
 
+/// A loop body that raises SIGINT in its first call and stops the loop itself in its
+/// `FALLBACK_CALLS`-th, should the request be lost; counts its calls.
+fn interrupt_first_call(
+    calls: &mut u32,
+) -> impl FnMut(&mut LoopCtx) -> Result<(), Infallible> + '_ {
+    move |ctx| {
+        *calls += 1;
+        if *calls == 1 {
+            raise(Signal::SIGINT).unwrap();
+        }
+        if *calls == FALLBACK_CALLS {
+            ctx.stop();
+        }
+        Ok(())
+    }
+}
+
+/// The loop ended at its next wait after the request, which every later reader still sees.
+fn assert_stopped_by_the_request(exit: Exit, calls: u32) {
+    assert_eq!(exit, Exit::Signal, "the stop request was lost");
+    assert_eq!(calls, 1, "the loop worked on after the stop request");
+    assert!(termination_requested(), "seen once, then forgotten");
+}
+
 #[test]
 fn a_stop_requested_while_a_fixed_rate_loop_works_ends_it() {
     in_own_process(
@@ -58,20 +83,9 @@ fn a_stop_requested_while_a_fixed_rate_loop_works_ends_it() {
             let mut rt = NodeRuntime::with_domain("worker", domain.clone()).unwrap();
             let mut calls = 0;
             let exit = rt
-                .run_loop(Duration::from_millis(10), |ctx| {
-                    calls += 1;
-                    if calls == 1 {
-                        raise(Signal::SIGINT).unwrap();
-                    }
-                    if calls == FALLBACK_CALLS {
-                        ctx.stop();
-                    }
-                    Ok::<_, std::convert::Infallible>(())
-                })
+                .run_loop(Duration::from_millis(10), interrupt_first_call(&mut calls))
                 .unwrap();
-            assert_eq!(exit, Exit::Signal, "the stop request was lost");
-            assert_eq!(calls, 1, "the loop worked on after the stop request");
-            assert!(termination_requested(), "seen once, then forgotten");
+            assert_stopped_by_the_request(exit, calls);
             assert!(!rt.sleep(Duration::from_millis(10)));
             drop(rt);
             release(&domain);
@@ -91,20 +105,13 @@ fn a_stop_requested_while_a_waitset_loop_works_ends_it() {
                 .unwrap();
             let mut calls = 0;
             let exit = rt
-                .run_on_data(&[&input], Duration::from_millis(10), |ctx| {
-                    calls += 1;
-                    if calls == 1 {
-                        raise(Signal::SIGINT).unwrap();
-                    }
-                    if calls == FALLBACK_CALLS {
-                        ctx.stop();
-                    }
-                    Ok::<_, std::convert::Infallible>(())
-                })
+                .run_on_data(
+                    &[&input],
+                    Duration::from_millis(10),
+                    interrupt_first_call(&mut calls),
+                )
                 .unwrap();
-            assert_eq!(exit, Exit::Signal, "the stop request was lost");
-            assert_eq!(calls, 1, "the loop worked on after the stop request");
-            assert!(termination_requested(), "seen once, then forgotten");
+            assert_stopped_by_the_request(exit, calls);
             drop((input, rt));
             release(&domain);
         },
