@@ -171,7 +171,6 @@ pub struct NodeRuntime<S: Transport = Doorbell> {
     lifecycle_seq: u64,
     state: LifecycleState,
     last_heartbeat: Instant,
-    stop_requested: bool,
     loop_phase: Option<Duration>,
 }
 
@@ -230,8 +229,8 @@ impl<S: Transport> NodeRuntime<S> {
             );
         }
         // Installs iceoryx2's SIGINT/SIGTERM handler now rather than at the first wait, so a stop
-        // request during set-up is seen instead of killing the process.
-        let stop_requested = wait_on_node(&node, Duration::ZERO);
+        // request during set-up is seen instead of killing the process (and kept for the loops).
+        wait_on_node(&node, Duration::ZERO);
         let lifecycle = lifecycle_service(&node)?
             .publisher_builder()
             .create()
@@ -247,7 +246,6 @@ impl<S: Transport> NodeRuntime<S> {
             lifecycle_seq: 0,
             state: LifecycleState::Starting,
             last_heartbeat: Instant::now(),
-            stop_requested,
             loop_phase: None,
         };
         runtime.announce(LifecycleState::Starting);
@@ -349,11 +347,9 @@ impl<S: Transport> NodeRuntime<S> {
     pub fn keep_running(&mut self) -> bool {
         // The flag iceoryx2's signal handler sets, read without a system call (a wake-up of
         // the doorbell transport costs only a few).
-        if !self.stop_requested && termination_requested() {
-            self.stop_requested = true;
-        }
+        let stop = termination_requested();
         self.heartbeat_if_due();
-        !self.stop_requested
+        !stop
     }
 
     /// Sleeps up to `duration`, returning early with `false` on a stop request; sends the
@@ -361,15 +357,15 @@ impl<S: Transport> NodeRuntime<S> {
     /// after a SIGSTOP, say) goes on until `duration` is over.
     pub fn sleep(&mut self, duration: Duration) -> bool {
         let until = Instant::now() + duration;
-        loop {
-            let left = until.saturating_duration_since(Instant::now());
-            self.stop_requested = self.stop_requested || wait_on_node(&self.node, left);
-            if self.stop_requested || Instant::now() >= until {
+        let mut stop = termination_requested();
+        while !stop {
+            stop = wait_on_node(&self.node, until.saturating_duration_since(Instant::now()));
+            if Instant::now() >= until {
                 break;
             }
         }
         self.heartbeat_if_due();
-        !self.stop_requested
+        !stop
     }
 
     /// Sets the phase of [`NodeRuntime::run_loop`]'s deadlines (see [`LOOP_PHASE_ENV`]);
